@@ -1,0 +1,372 @@
+"""The plant equations (thesis eq. 3.1-3.18, 4.9-4.14, CONTRACT "pinned" details),
+compiled with numba. One set of equations serves the step simulator (node), the
+single-trajectory simulator (replay) and the batch simulator (Monte Carlo).
+
+State vector (float64[N_STATE]):
+  0 film_thickness h [m]        1 pack_temperature [C]
+  2 hysteresis force [N]        3 pack force (lag state) [N]
+  4 energy E = int |w T| dt [J] 5 sign of the last slip above the lock tolerance
+  6 heat power |w T| at the last output [W]
+
+Film integration: exponential (Rosenbrock-)Euler steps on h with the analytic Jacobian,
+sub-stepped so that h changes by at most MAX_REL_DH per sub-step. It is exact for the
+linearised film equation, so the stiffness near contact (|J| up to ~1e3 1/s) costs nothing
+at steady state, and the relative-change limit keeps h > 0 by construction.
+Thermal: exact exponential solution of eq. 3.18 over the step with the heat input held
+at the trapezoid of the start and end powers.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+from . import params as P
+
+N_STATE = 7
+S_H, S_THETA, S_FHYST, S_FPACK, S_ENERGY, S_SIGN, S_POWER = range(7)
+
+# output record
+N_OUT = 16
+(O_TORQUE, O_TA, O_TH, O_MU, O_H, O_THETA, O_VISC, O_POWER, O_ENERGY, O_LOCKED,
+ O_FPACK, O_CLAMPED, O_PRESSURE_MPA, O_RANGE, O_DRAG, O_PA) = range(16)
+
+# derived constants
+N_DER = 12
+(D_AN, D_Q, D_KP, D_FMAX, D_TA_GEOM, D_TH_GEOM, D_FILM_DEN, D_KD12, D_SQRTK, D_MU60,
+ D_FE0, D_HMAX) = range(12)
+
+MAX_REL_DH = 0.1
+MAX_SUBSTEPS = 400
+INV_SQRT_2PI = 1.0 / math.sqrt(2.0 * math.pi)
+SQRT2 = math.sqrt(2.0)
+P_MAX_MPA, THETA_MAX_C = 20.0, 230.0
+SLIP_LIMIT = 1.0e4        # |slip| clamp inside the model (the node rejects > 1000)
+SUMP_MIN, SUMP_MAX = -100.0, 500.0
+H_MAX = 1.0e-2            # film cap [m]: far beyond any open-clutch gap
+
+
+@njit(cache=True)
+def greenwood_williamson_fe(x):
+    """F_e(x) = 1/sqrt(2 pi) * int_x^inf (s - x) exp(-s^2/2) ds (eq. 3.7), closed form."""
+    v = math.exp(-0.5 * x * x) * INV_SQRT_2PI - x * 0.5 * math.erfc(x / SQRT2)
+    return v if v > 0.0 else 0.0
+
+
+@njit(cache=True)
+def derived_constants(p):
+    d = np.empty(N_DER)
+    ro, ri = p[P.R_OUTER], p[P.R_INNER]
+    an = math.pi * (ro * ro - ri * ri)
+    d[D_AN] = an
+    q = ro * ro + ri * ri + (ro * ro - ri * ri) / math.log(ri / ro)
+    d[D_Q] = q
+    kp = p[P.YOUNGS] * math.pi * p[P.ASP_DENSITY] * p[P.ASP_RADIUS] * p[P.SIGMA]
+    d[D_KP] = kp
+    d[D_FE0] = INV_SQRT_2PI
+    d[D_FMAX] = 0.9 * an * kp * INV_SQRT_2PI
+    d[D_TA_GEOM] = p[P.N_FRICTION] * (ro ** 3 - ri ** 3) / 3.0 * 2.0 * math.pi
+    d[D_TH_GEOM] = p[P.N_FRICTION] * (ro ** 4 - ri ** 4) / 2.0 * math.pi * p[P.A_RED]
+    d[D_FILM_DEN] = 6.0 * an * q * p[P.A_RED]
+    d[D_KD12] = 12.0 * p[P.K_PERM] * p[P.LINING_D]
+    d[D_SQRTK] = math.sqrt(p[P.K_PERM])
+    d[D_MU60] = p[P.ALPHA0] * 60.0 ** (-p[P.ALPHA1])
+    d[D_HMAX] = max(H_MAX, 10.0 * p[P.H0])
+    return d
+
+
+@njit(cache=True)
+def viscosity(theta, p):
+    """ATF dynamic viscosity [Pa s], eq. 3.17, theta clamped at >= 1 C."""
+    th = theta if theta > 1.0 else 1.0
+    return p[P.ALPHA0] * th ** (-p[P.ALPHA1])
+
+
+@njit(cache=True)
+def friction_coefficient(w_abs, pressure_mpa, theta, p):
+    """Stribeck mu_f(w, P, theta), eq. 4.9-4.14 with constant i (table 6.3 order)."""
+    pr = min(max(pressure_mpa, 0.0), P_MAX_MPA)
+    th = min(max(theta, 0.0), THETA_MAX_C)
+    a = P.FRICTION_A
+    pr2, th2 = pr * pr, th * th
+    mu_c = p[a] + p[a + 1] * pr + p[a + 2] * pr2 + p[a + 3] * th + p[a + 4] * th2
+    mu_s = p[a + 5] + p[a + 6] * pr + p[a + 7] * pr2 + p[a + 8] * th + p[a + 9] * th2
+    w_s = p[a + 10] + p[a + 11] * pr + p[a + 12] * pr2 + p[a + 13] * th + p[a + 14] * th2
+    k_v = p[a + 15] + p[a + 16] * pr + p[a + 17] * pr2 + p[a + 18] * th + p[a + 19] * th2
+    if w_s < 1e-6:
+        w_s = 1e-6
+    r = w_abs / w_s
+    e = math.exp(-(r ** p[P.FRICTION_I])) if r < 1e6 else 0.0
+    mu = mu_c + (mu_s - mu_c) * e + k_v * w_abs
+    return mu if mu > 0.0 else 0.0
+
+
+@njit(cache=True)
+def asperity_pressure(h, p, d):
+    """Mean asperity pressure P_a(h) = E * pi * N * beta * sigma * F_e(h/sigma) (eq. 3.5-3.6)."""
+    return d[D_KP] * greenwood_williamson_fe(h / p[P.SIGMA])
+
+
+@njit(cache=True)
+def film_rate(h, f_pack, mu, p, d):
+    """dh/dt of eq. 3.2 and its derivative d(dh/dt)/dh.
+
+    dh/dt = phi * xi * delta / (g * A_red) * gamma * h^3, gamma = -1/(6 mu A_N Q); the h^3
+    cancels the one in delta's denominator, so the rate is finite at h -> 0.
+    """
+    sigma = p[P.SIGMA]
+    hh = h / sigma
+    phi = 1.0 - 0.9 * math.exp(-0.56 * hh)
+    eta = 1.0 / (1.0 + p[P.BJ_CHI] * h / d[D_SQRTK])
+    h3 = h * h * h
+    num = h3 * (1.0 + 3.0 * eta) + d[D_KD12]
+    g = 0.5 * (1.0 + math.erf(hh / SQRT2))
+    c = phi * num / (mu * d[D_FILM_DEN] * g)
+    fe = greenwood_williamson_fe(hh)
+    f_asp = d[D_AN] * d[D_KP] * fe
+    xi = f_pack - f_asp
+    rate = -c * xi
+    # Jacobian: d rate/dh = -c' xi + c dF_a/dh ; dF_a/dh = -A_N kP Q(H)/sigma
+    upper_tail = 0.5 * math.erfc(hh / SQRT2)
+    dfa_dh = -d[D_AN] * d[D_KP] * upper_tail / sigma
+    dphi = 0.9 * 0.56 / sigma * math.exp(-0.56 * hh)
+    deta = -eta * eta * p[P.BJ_CHI] / d[D_SQRTK]
+    dnum = 3.0 * h * h * (1.0 + 3.0 * eta) + h3 * 3.0 * deta
+    dg = math.exp(-0.5 * hh * hh) * INV_SQRT_2PI / sigma
+    dc = c * (dphi / phi + dnum / num - dg / g)
+    jac = -dc * xi + c * dfa_dh
+    return rate, jac
+
+
+@njit(cache=True)
+def film_step(h, f_start, f_target, tau, dt, mu, p, d):
+    """Advance the film over dt. Pack force: f_target if tau <= 0, else the first-order lag
+    from f_start towards f_target (exact), sampled at each sub-step's midpoint."""
+    remaining = dt
+    elapsed = 0.0
+    n = 0
+    hmax = d[D_HMAX]
+    while remaining > 1e-15 and n < MAX_SUBSTEPS:
+        s = remaining
+        for _ in range(8):
+            if tau > 0.0:
+                fm = f_target + (f_start - f_target) * math.exp(-(elapsed + 0.5 * s) / tau)
+            else:
+                fm = f_target
+            if fm > d[D_FMAX]:
+                fm = d[D_FMAX]
+            rate, jac = film_rate(h, fm, mu, p, d)
+            z = jac * s
+            if abs(z) < 1e-8:
+                phi1 = 1.0 + 0.5 * z
+            elif z > 50.0:
+                phi1 = math.exp(50.0) / z
+            else:
+                phi1 = math.expm1(z) / z
+            dh = phi1 * s * rate
+            lim = MAX_REL_DH * h
+            if abs(dh) <= lim or n == MAX_SUBSTEPS - 1:
+                break
+            s = s * max(0.1, 0.9 * lim / abs(dh))
+        if dh < -0.5 * h:  # only reachable at the sub-step cap
+            dh = -0.5 * h
+        h = h + dh
+        if h > hmax:
+            h = hmax
+        remaining -= s
+        elapsed += s
+        n += 1
+    return h
+
+
+@njit(cache=True)
+def pack_force_target(state, applied_force, p):
+    """Process one measured-force sample through the force chain:
+    negative -> 0, spring preload, hysteresis (play operator). Updates the hysteresis state;
+    without a lag, the pack force follows at once."""
+    f = applied_force if applied_force > 0.0 else 0.0
+    if not (f < 1e12):
+        f = 1e12
+    pre = p[P.PRELOAD_N]
+    if pre > 0.0:
+        f = f - pre if f > pre else 0.0
+    r = p[P.HYST_RATIO]
+    if r > 0.0:
+        lo, hi = f * (1.0 - r), f * (1.0 + r)
+        fh = state[S_FHYST]
+        if fh < lo:
+            fh = lo
+        elif fh > hi:
+            fh = hi
+        f = fh
+    state[S_FHYST] = f
+    if p[P.LAG_TAU_S] <= 0.0:
+        state[S_FPACK] = f
+    return f
+
+
+@njit(cache=True)
+def init_state(state, applied_force, sump_temperature, p):
+    state[S_H] = p[P.H0]
+    state[S_THETA] = min(max(sump_temperature, SUMP_MIN), SUMP_MAX)
+    state[S_FHYST] = 0.0
+    state[S_ENERGY] = state[S_ENERGY]  # energy is carried (campaign), not reset here
+    state[S_SIGN] = 1.0
+    state[S_POWER] = 0.0
+    f = applied_force if applied_force > 0.0 else 0.0
+    pre = p[P.PRELOAD_N]
+    if pre > 0.0:
+        f = f - pre if f > pre else 0.0
+    state[S_FHYST] = min(f, 1e12)
+    state[S_FPACK] = state[S_FHYST]
+
+
+@njit(cache=True)
+def outputs(state, slip, sump_temperature, p, d, out):
+    """Torque and the full record at the current state with the current inputs.
+    Call pack_force_target() with the sample's force first. Updates sign and power."""
+    w = slip
+    if not (w < SLIP_LIMIT):
+        w = SLIP_LIMIT
+    if not (w > -SLIP_LIMIT):
+        w = -SLIP_LIMIT
+    w_abs = abs(w)
+    h = state[S_H]
+    theta = state[S_THETA]
+    f_pack = state[S_FPACK]
+    clamped = 0.0
+    if f_pack > d[D_FMAX]:
+        f_pack = d[D_FMAX]
+        clamped = 1.0
+    pressure_mpa = f_pack / d[D_AN] * 1e-6
+    mu = viscosity(theta, p)
+    pa = asperity_pressure(h, p, d)
+    locked = w_abs < p[P.LOCK_SLIP]
+    if not locked:
+        state[S_SIGN] = 1.0 if w > 0.0 else -1.0
+    sign = state[S_SIGN]
+    degr = 1.0
+    if p[P.ENERGY_SCALE_J] > 0.0:
+        degr = math.exp(-state[S_ENERGY] / p[P.ENERGY_SCALE_J])
+    if locked:
+        mu_f = friction_coefficient(0.0, pressure_mpa, theta, p) * degr
+        t_a = sign * mu_f * pa * d[D_TA_GEOM]
+        t_h = 0.0
+        drag = 0.0
+    else:
+        mu_f = friction_coefficient(w_abs, pressure_mpa, theta, p) * degr
+        t_a = sign * mu_f * pa * d[D_TA_GEOM]
+        hh = h / p[P.SIGMA]
+        phi_f = 1.0 + 0.5 * math.exp(-0.8 * hh)
+        phi_fs = 11.1 * hh ** 2.31 * math.exp(-2.38 * hh + 0.11 * hh * hh) if hh <= 5.0 else 0.0
+        t_h = w * (phi_f + phi_fs) / h * mu * d[D_TH_GEOM]
+        drag = p[P.DRAG_COEFF] * w * mu / d[D_MU60] if p[P.DRAG_COEFF] != 0.0 else 0.0
+    torque = t_a + t_h + drag
+    power = abs(w * torque)
+    state[S_POWER] = power
+    out[O_TORQUE] = torque
+    out[O_TA] = t_a
+    out[O_TH] = t_h
+    out[O_MU] = mu_f
+    out[O_H] = h
+    out[O_THETA] = theta
+    out[O_VISC] = mu
+    out[O_POWER] = power
+    out[O_ENERGY] = state[S_ENERGY]
+    out[O_LOCKED] = 1.0 if locked else 0.0
+    out[O_FPACK] = f_pack
+    out[O_CLAMPED] = clamped
+    out[O_PRESSURE_MPA] = pressure_mpa
+    out[O_RANGE] = 1.0 if (pressure_mpa > P_MAX_MPA or theta < 0.0 or theta > THETA_MAX_C) else 0.0
+    out[O_DRAG] = drag
+    out[O_PA] = pa
+    return torque
+
+
+@njit(cache=True)
+def advance(state, slip, sump_temperature, dt, p, d, scratch):
+    """Integrate the state over dt with the current inputs held (the pack-force target is
+    the one set by the last pack_force_target() call)."""
+    if not (dt > 0.0):
+        return
+    theta0 = state[S_THETA]
+    mu = viscosity(theta0, p)
+    tau = p[P.LAG_TAU_S]
+    f_start = state[S_FPACK]
+    f_target = state[S_FHYST]
+    state[S_H] = film_step(state[S_H], f_start, f_target, tau, dt, mu, p, d)
+    if tau > 0.0:
+        state[S_FPACK] = f_target + (f_start - f_target) * math.exp(-dt / tau)
+    p_start = state[S_POWER]
+    outputs(state, slip, sump_temperature, p, d, scratch)  # end-of-step power, inputs held
+    p_end = scratch[O_POWER]
+    heat = 0.5 * (p_start + p_end)
+    sump = min(max(sump_temperature, SUMP_MIN), SUMP_MAX)
+    # thermal, eq. 3.18, exact for held heat input
+    w_abs = min(abs(slip), SLIP_LIMIT)
+    f_kn = min(state[S_FPACK], d[D_FMAX]) * 1e-3
+    htf = p[P.B1] + p[P.B2] * w_abs + p[P.B3] * f_kn + p[P.B4] * w_abs * f_kn
+    if htf < p[P.HTF_MIN]:
+        htf = p[P.HTF_MIN]
+    k = htf * d[D_AN]
+    q = heat / p[P.N_SEPARATOR]
+    theta_eq = sump + q / k
+    state[S_THETA] = theta_eq + (theta0 - theta_eq) * math.exp(-k * dt / p[P.PLATE_HEAT_CAPACITY])
+    state[S_ENERGY] += heat * dt
+    state[S_POWER] = p_start  # restored: the next outputs() call sets it for the new sample
+
+
+@njit(cache=True)
+def run_trajectory(p, t, force, slip, sump, run_start, energy0):
+    """Replay timing of CONTRACT.md: row k's outputs come from the state at t_k (integrated
+    from t_{k-1} with row k-1's inputs held) and row k's inputs. A run_start row restarts
+    the plant (film, pack temperature, actuator states); energy carries over."""
+    n = t.size
+    d = derived_constants(p)
+    out = np.zeros((n, N_OUT))
+    state = np.zeros(N_STATE)
+    scratch = np.zeros(N_OUT)
+    state[S_ENERGY] = energy0
+    for k in range(n):
+        if k == 0 or run_start[k]:
+            init_state(state, force[k], sump[k], p)
+        else:
+            advance(state, slip[k - 1], sump[k - 1], t[k] - t[k - 1], p, d, scratch)
+        pack_force_target(state, force[k], p)
+        outputs(state, slip[k], sump[k], p, d, out[k])
+    return out
+
+
+@njit(cache=True, parallel=True)
+def run_batch(pmat, t, force, slip, sump, run_start, energy0):
+    """Torque and pack temperature for many parameter sets (rows of pmat) on one input set."""
+    m = pmat.shape[0]
+    n = t.size
+    torque = np.empty((m, n))
+    theta = np.empty((m, n))
+    for j in prange(m):
+        p = pmat[j]
+        d = derived_constants(p)
+        state = np.zeros(N_STATE)
+        scratch = np.zeros(N_OUT)
+        out = np.zeros(N_OUT)
+        state[S_ENERGY] = energy0
+        for k in range(n):
+            if k == 0 or run_start[k]:
+                init_state(state, force[k], sump[k], p)
+            else:
+                advance(state, slip[k - 1], sump[k - 1], t[k] - t[k - 1], p, d, scratch)
+            pack_force_target(state, force[k], p)
+            torque[j, k] = outputs(state, slip[k], sump[k], p, d, out)
+            theta[j, k] = out[O_THETA]
+    return torque, theta
+
+
+@njit(cache=True)
+def friction_grid(p, w_abs, pressure_mpa, theta):
+    """mu_f on arrays (same shape), for fitting and positivity checks."""
+    out = np.empty(w_abs.size)
+    for k in range(w_abs.size):
+        out[k] = friction_coefficient(w_abs[k], pressure_mpa[k], theta[k], p)
+    return out

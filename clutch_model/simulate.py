@@ -1,0 +1,152 @@
+"""Simulators over the compiled plant equations, in the manner of scipy's solve_ivp:
+plain arrays in, a result object out.
+
+- ``simulate``: one trajectory over sampled inputs (replay timing of CONTRACT.md).
+- ``simulate_batch``: many parameter sets on the same inputs (Monte Carlo), in parallel.
+- ``Plant``: the real-time step simulator the ROS node drives (state in, inputs held over
+  dt, state out).
+All three run the same kernel functions (clutch_model.kernels).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import kernels as K
+from .mechanisms import apply_measurement
+from .params import ClutchModel
+
+
+@dataclass
+class SimResult:
+    """One simulated trajectory; every array has the length of ``t``."""
+
+    t: np.ndarray
+    torque_nm: np.ndarray
+    asperity_torque_nm: np.ndarray
+    hydrodynamic_torque_nm: np.ndarray
+    drag_torque_nm: np.ndarray
+    friction_coefficient: np.ndarray
+    film_thickness_m: np.ndarray
+    pack_temperature_c: np.ndarray
+    viscosity_pa_s: np.ndarray
+    power_w: np.ndarray
+    energy_j: np.ndarray
+    locked: np.ndarray
+    pack_force_n: np.ndarray
+    force_clamped: np.ndarray
+    pressure_mpa: np.ndarray
+    out_of_range: np.ndarray
+    asperity_pressure_pa: np.ndarray
+
+    @property
+    def final_energy_j(self) -> float:
+        return float(self.energy_j[-1] + self.power_w[-1] * 0.0) if self.t.size else 0.0
+
+
+@dataclass
+class BatchResult:
+    torque_nm: np.ndarray            # (n_sets, n)
+    pack_temperature_c: np.ndarray   # (n_sets, n)
+
+
+def _as_inputs(t, applied_force_n, slip_speed_rad_s, sump_temperature_c, run_start):
+    t = np.ascontiguousarray(t, dtype=float)
+    n = t.size
+    f = np.ascontiguousarray(np.broadcast_to(np.asarray(applied_force_n, float), (n,)))
+    w = np.ascontiguousarray(np.broadcast_to(np.asarray(slip_speed_rad_s, float), (n,)))
+    s = np.ascontiguousarray(np.broadcast_to(np.asarray(sump_temperature_c, float), (n,)))
+    if run_start is None:
+        rs = np.zeros(n, dtype=np.bool_)
+    else:
+        rs = np.ascontiguousarray(run_start, dtype=np.bool_)
+    if n:
+        rs[0] = True
+    for name, arr in (("time", t), ("applied force", f), ("slip speed", w), ("sump temperature", s)):
+        if not np.all(np.isfinite(arr)):
+            raise ValueError(f"{name} has non-finite samples")
+    return t, f, w, s, rs
+
+
+def simulate(model: ClutchModel, t, applied_force_n, slip_speed_rad_s, sump_temperature_c,
+             run_start=None, energy0_j: float = 0.0) -> SimResult:
+    """Simulate the plant over sampled inputs (zero-order hold between samples).
+
+    ``run_start`` marks rows where a new test run (bag) starts: the plant restarts there
+    (film at initial.film_thickness, pack at the sump temperature) while the dissipated
+    energy carries on (friction_degradation). Returns the plant signals at every sample.
+    """
+    t, f, w, s, rs = _as_inputs(t, applied_force_n, slip_speed_rad_s, sump_temperature_c, run_start)
+    out = K.run_trajectory(model.vector(), t, f, w, s, rs, float(energy0_j))
+    return SimResult(
+        t=t, torque_nm=out[:, K.O_TORQUE], asperity_torque_nm=out[:, K.O_TA],
+        hydrodynamic_torque_nm=out[:, K.O_TH], drag_torque_nm=out[:, K.O_DRAG],
+        friction_coefficient=out[:, K.O_MU], film_thickness_m=out[:, K.O_H],
+        pack_temperature_c=out[:, K.O_THETA], viscosity_pa_s=out[:, K.O_VISC],
+        power_w=out[:, K.O_POWER], energy_j=out[:, K.O_ENERGY], locked=out[:, K.O_LOCKED] > 0.5,
+        pack_force_n=out[:, K.O_FPACK], force_clamped=out[:, K.O_CLAMPED] > 0.5,
+        pressure_mpa=out[:, K.O_PRESSURE_MPA], out_of_range=out[:, K.O_RANGE] > 0.5,
+        asperity_pressure_pa=out[:, K.O_PA])
+
+
+def predict_measured_torque(model: ClutchModel, t, torque_nm, run_start=None) -> np.ndarray:
+    """What the torque sensor reads: the model's measurement mechanisms applied."""
+    t = np.asarray(t, dtype=float)
+    rs = np.zeros(t.size, bool) if run_start is None else np.asarray(run_start, bool)
+    return apply_measurement(model.mechanisms, t, np.asarray(torque_nm, float), rs)
+
+
+def parameter_matrix(models) -> np.ndarray:
+    return np.ascontiguousarray(np.stack([m.vector() for m in models]))
+
+
+def simulate_batch(param_matrix, t, applied_force_n, slip_speed_rad_s, sump_temperature_c,
+                   run_start=None, energy0_j: float = 0.0) -> BatchResult:
+    """Run many parameter sets (rows of ``param_matrix``, see ``ClutchModel.vector``, or a
+    list of ClutchModel) over the same inputs, in parallel over the sets."""
+    if not isinstance(param_matrix, np.ndarray):
+        param_matrix = parameter_matrix(param_matrix)
+    pm = np.ascontiguousarray(np.atleast_2d(param_matrix), dtype=float)
+    t, f, w, s, rs = _as_inputs(t, applied_force_n, slip_speed_rad_s, sump_temperature_c, run_start)
+    torque, theta = K.run_batch(pm, t, f, w, s, rs, float(energy0_j))
+    return BatchResult(torque_nm=torque, pack_temperature_c=theta)
+
+
+class Plant:
+    """Real-time step simulator: ``sample`` the latest inputs, read the record, ``advance``.
+
+    >>> plant = Plant(model); plant.reset(force, sump)
+    >>> rec = plant.sample(force, slip, sump)     # outputs at the current state
+    >>> plant.advance(dt)                         # inputs of the last sample held over dt
+    """
+
+    def __init__(self, model: ClutchModel):
+        self.model = model
+        self._p = model.vector()
+        self._d = K.derived_constants(self._p)
+        self.state = np.zeros(K.N_STATE)
+        self.record = np.zeros(K.N_OUT)
+        self._scratch = np.zeros(K.N_OUT)
+        self._slip = 0.0
+        self._sump = 20.0
+        self.max_pack_force_n = float(self._d[K.D_FMAX])
+
+    def reset(self, applied_force_n: float, sump_temperature_c: float) -> None:
+        self.state[:] = 0.0
+        K.init_state(self.state, float(applied_force_n), float(sump_temperature_c), self._p)
+        self._sump = float(sump_temperature_c)
+
+    def sample(self, applied_force_n: float, slip_speed_rad_s: float, sump_temperature_c: float) -> np.ndarray:
+        """Apply a new input sample and return the output record (see kernels.O_*)."""
+        self._slip, self._sump = float(slip_speed_rad_s), float(sump_temperature_c)
+        K.pack_force_target(self.state, float(applied_force_n), self._p)
+        K.outputs(self.state, self._slip, self._sump, self._p, self._d, self.record)
+        return self.record
+
+    def advance(self, dt: float) -> None:
+        K.advance(self.state, self._slip, self._sump, float(dt), self._p, self._d, self._scratch)
+
+    @property
+    def energy_j(self) -> float:
+        return float(self.state[K.S_ENERGY])

@@ -1,0 +1,65 @@
+"""`clutch-sim` entry point: a thin argparse layer over clutch_sim.commands.
+
+Every subcommand lives in its own module under clutch_sim/commands/ with two functions,
+``add_parser(subparsers)`` and ``run(args) -> int``; modules keep heavy imports inside run().
+User errors (clutch_model.errors.ClutchSimError and OSError on user files) are caught here,
+once, and printed as one line with a non-zero exit code.
+"""
+from __future__ import annotations
+
+import argparse
+import importlib
+import os
+import sys
+
+COMMANDS = ["replay", "synth", "fit_friction", "fit_thermal", "calibrate", "montecarlo",
+            "sensitivity", "diagnose", "play", "record"]
+
+
+def add_params_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--params", "--model", dest="params", metavar="FILE", default=None,
+                        help="clutch parameter file (default: the shipped reference clutch RC-1)")
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):  # one line, exit 2, as argparse does, without the usage block
+        self.exit(2, f"clutch-sim: error: {message}\n")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog="clutch-sim", description="Virtual wet clutch for eLSD controller development.")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    sub.required = True
+    for name in COMMANDS:
+        try:
+            module = importlib.import_module(f"clutch_sim.commands.{name}")
+        except ModuleNotFoundError as exc:
+            if exc.name == f"clutch_sim.commands.{name}":
+                continue  # command not built yet
+            raise
+        module.add_parser(sub)
+    return parser
+
+
+def main(argv=None) -> int:
+    os.environ.setdefault("NUMBA_CACHE_DIR", os.path.join(os.path.dirname(os.path.dirname(
+        os.path.abspath(__file__))), ".numba_cache"))
+    from clutch_model.errors import ClutchSimError
+
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except ClutchSimError as exc:
+        print(f"clutch-sim {args.command}: error: {exc}", file=sys.stderr)
+        return 1
+    except (FileNotFoundError, PermissionError, IsADirectoryError, NotADirectoryError) as exc:
+        print(f"clutch-sim {args.command}: error: {exc.strerror}: {exc.filename}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print(f"clutch-sim {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())
