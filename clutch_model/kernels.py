@@ -311,8 +311,10 @@ def advance(state, slip, sump_temperature, dt, p, d, scratch):
         htf = p[P.HTF_MIN]
     k = htf * d[D_AN]
     q = heat / p[P.N_SEPARATOR]
-    theta_eq = sump + q / k
-    state[S_THETA] = theta_eq + (theta0 - theta_eq) * math.exp(-k * dt / p[P.PLATE_HEAT_CAPACITY])
+    # theta -> theta_eq = sump + q/k with rate k/C; written with expm1 so that k -> 0
+    # degrades gracefully to the adiabatic q*dt/C
+    frac = -math.expm1(-k * dt / p[P.PLATE_HEAT_CAPACITY])
+    state[S_THETA] = theta0 + (q / k - (theta0 - sump)) * frac
     state[S_ENERGY] += heat * dt
     state[S_POWER] = p_start  # restored: the next outputs() call sets it for the new sample
 

@@ -1,0 +1,46 @@
+"""clutch-sim replay: simulate car-test bags offline and compare with the measured torque."""
+from __future__ import annotations
+
+import math
+import sys
+
+from ..cli import add_params_option
+from ._common import add_topic_options, load_runs
+
+
+def add_parser(sub):
+    p = sub.add_parser("replay", help="simulate bags' inputs offline, write OUT.csv, print RMSE",
+                       description="Simulate the bags' inputs offline (in log-time order, dissipated "
+                                   "energy carried from bag to bag) and write the predicted torque "
+                                   "and pack temperature next to the measured ones.")
+    p.add_argument("--bag", "--bags", dest="bags", nargs="+", required=True, metavar="BAG",
+                   help="rosbag2 directories (MCAP or sqlite3) or bare .mcap files")
+    add_params_option(p)
+    p.add_argument("--out", required=True, metavar="OUT.csv")
+    add_topic_options(p)
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    from clutch_model.params import load_model
+    from clutch_model.replay import replay_runs, write_replay_csv
+
+    model = load_model(args.params)
+    runs = load_runs(args, args.bags)
+    result = replay_runs(model, runs)
+    write_replay_csv(result, args.out)
+    total = sum(len(r) for r in runs)
+    print(f"replayed {len(runs)} bag(s), {total} rows -> {args.out}")
+    for name, rmse_t, rmse_th, n in result.per_run():
+        extra = f", pack temperature RMSE {rmse_th:.2f} C" if not math.isnan(rmse_th) else ""
+        print(f"  {name}: {n} rows, torque RMSE {rmse_t:.2f} N*m{extra}")
+    rmse = result.rmse_torque()
+    if math.isnan(rmse):
+        print("torque RMSE: n/a (no /clutch/measured_torque in the bags)")
+    else:
+        print(f"torque RMSE: {rmse:.3f} N*m")
+    rmse_th = result.rmse_pack_temperature()
+    if not math.isnan(rmse_th):
+        print(f"pack temperature RMSE: {rmse_th:.3f} C")
+    sys.stdout.flush()
+    return 0
