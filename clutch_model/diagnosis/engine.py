@@ -1,0 +1,185 @@
+"""The whole loop of `clutch-sim diagnose`.
+
+1. fit the friction model on the bench (thesis §5.2.1);
+2. calibrate on the car runs it fits on (regression + Monte Carlo, thesis §5.3), holding runs
+   out: every third run from the second (interleaved in time, so drift, temperatures and
+   slip levels are on both sides; the held-out runs' inputs still drive the campaign's
+   carried state, their torque is never fitted);
+3. show what the baseline gets wrong (residual features, lag, loops, drift);
+4. name the cause: fit every catalog mechanism (jointly with the same friction correction the
+   baseline got) and compare on the held-out runs against the noise level (verdict.py);
+5. extend the model with the winner, and measure the gain on the held-out runs.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import DataError
+from ..params import ClutchModel
+from ..replay import replay_runs
+from ..runs import Campaign
+from . import features as F
+from .fitting import CANDIDATE_IDS, CandidateFit, fit_candidate
+from .verdict import blocks, decide, score_candidates
+
+
+def choose_held_out(names: list) -> list:
+    """Every third run from the second (time order); one run when there are two or three."""
+    n = len(names)
+    if n < 2:
+        raise DataError("diagnose needs at least 2 car-test runs (one is held out for validation)")
+    if n <= 3:
+        return [names[n // 2]] if n == 3 else [names[-1]]
+    return [names[k] for k in range(1, n, 3)]
+
+
+@dataclass
+class Diagnosis:
+    cause_id: str
+    reason: str
+    evidence: str
+    cause_parameters: dict
+    sigma_nm: float
+    rmse: dict                       # nominal, bench, calibrated, extended (held-out)
+    held_out: list
+    fit_runs: list
+    candidates: list                 # CandidateFit, sorted by held-out RMSE
+    scores: list
+    features_r2: dict
+    nominal_model: ClutchModel
+    bench_model: ClutchModel
+    calibrated_model: ClutchModel
+    extended_model: ClutchModel
+    campaign: Campaign
+    calibrated_fit: CandidateFit
+    extended_fit: CandidateFit | None
+    nominal_pred: np.ndarray
+    bench_info: dict = field(default_factory=dict)
+    calibration_info: dict = field(default_factory=dict)
+    timings: dict = field(default_factory=dict)
+
+    @property
+    def gain_pct(self) -> float:
+        c, e = self.rmse["calibrated"], self.rmse["extended"]
+        return 100.0 * (c - e) / c if c > 0 else 0.0
+
+
+def _rmse(resid, mask):
+    ok = mask & np.isfinite(resid)
+    return float(np.sqrt(np.mean(resid[ok] ** 2))) if ok.any() else math.nan
+
+
+def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held_out=None,
+                      candidates=None, calibrate=None, progress=None, bench_info=None) -> Diagnosis:
+    """Diagnose a campaign given the bench-fitted model. ``calibrate(model, fit_campaign)`` may
+    add a car-data calibration (regression + Monte Carlo) before the shared friction
+    correction; it returns (model, info)."""
+    tick = time.perf_counter()
+    timings = {}
+    campaign = runs if isinstance(runs, Campaign) else Campaign(list(runs))
+    names = campaign.names
+    if not np.isfinite(campaign.torque_measured).any():
+        raise DataError("the bags have no /clutch/measured_torque: nothing to diagnose against")
+    held_out = list(held_out) if held_out else choose_held_out(names)
+    unknown = set(held_out) - set(names)
+    if unknown:
+        raise DataError(f"held-out run not in the campaign: {sorted(unknown)[0]}")
+    fit_runs = [n for n in names if n not in held_out]
+    if not fit_runs:
+        raise DataError("every run is held out: nothing left to fit on")
+    held_idx = [names.index(n) for n in held_out]
+    eval_mask = np.isin(campaign.run_index, held_idx)
+    fit_mask = ~eval_mask
+    say = progress or (lambda msg: None)
+
+    # nominal and bench models on the campaign
+    nominal_rep = replay_runs(nominal, campaign)
+    nominal_resid = campaign.torque_measured - nominal_rep.torque_sim
+    bench_rep = replay_runs(bench_model, campaign)
+    energy_total = float(bench_rep.sim.energy_j[-1] + bench_rep.sim.power_w[-1] * 0.0)
+    torque_scale = float(np.nanpercentile(np.abs(campaign.torque_measured), 95))
+    timings["simulate nominal"] = time.perf_counter() - tick
+
+    # calibration on the fit runs: optional regression + Monte Carlo, then the shared correction
+    calibration_info = {}
+    cal_base = bench_model
+    if calibrate is not None:
+        say("calibrating friction on the fit runs (regression + Monte Carlo)")
+        cal_base, calibration_info = calibrate(bench_model, campaign.subset(fit_runs))
+    t0 = time.perf_counter()
+    say("fitting the baseline friction correction")
+    calibrated = fit_candidate(cal_base, campaign, fit_mask, None, energy_total, torque_scale)
+    timings["calibrate"] = time.perf_counter() - t0
+
+    resid0 = calibrated.residual
+    sigma = F.noise_sigma(resid0, campaign.run_start)
+    if not np.isfinite(sigma) or sigma <= 0:
+        sigma = max(float(np.nanstd(resid0)) * 1e-3, 1e-9)
+
+    # candidates
+    fits = []
+    ids = list(candidates) if candidates else CANDIDATE_IDS
+    t0 = time.perf_counter()
+    for cid in ids:
+        say(f"fitting candidate {cid}")
+        fit = fit_candidate(cal_base, campaign, fit_mask, cid, energy_total, torque_scale)
+        fit.held_out_rmse_nm = _rmse(fit.residual, eval_mask)
+        fits.append(fit)
+    timings["candidates"] = time.perf_counter() - t0
+    calibrated.held_out_rmse_nm = _rmse(resid0, eval_mask)
+
+    labels = blocks(campaign.t, eval_mask, campaign.run_index)
+    mse0, excess, scores = score_candidates(resid0, {f.id: f.residual for f in fits}, sigma, labels)
+    cause, best, reason = decide(mse0, excess, sigma, scores)
+    fits.sort(key=lambda f: f.held_out_rmse_nm)
+
+    # features of the calibrated residual (evidence)
+    sim_cal = replay_runs(calibrated.model, campaign).sim
+    feats = F.feature_signals(campaign, sim_cal, sim_cal.energy_j)
+    r2 = F.explained_variance(resid0, feats, fit_mask, eval_mask)
+
+    extended_fit = None
+    extended_model = calibrated.model
+    cause_params = {}
+    if best is not None:
+        extended_fit = next(f for f in fits if f.id == cause)
+        extended_model = extended_fit.model
+        cause_params = dict(extended_fit.parameters)
+    rmse = {
+        "nominal": _rmse(nominal_resid, eval_mask),
+        "bench": _rmse(campaign.torque_measured - bench_rep.torque_sim, eval_mask),
+        "calibrated": calibrated.held_out_rmse_nm,
+        "extended": extended_fit.held_out_rmse_nm if extended_fit else calibrated.held_out_rmse_nm,
+    }
+    if cause == "unexplained":
+        top = sorted(r2.items(), key=lambda kv: -kv[1])[:3]
+        cause_params = {"residual_follows": {k: round(v, 3) for k, v in top}}
+    evidence = _evidence(cause, reason, sigma, rmse, scores, r2, cause_params)
+    timings["total"] = time.perf_counter() - tick
+    return Diagnosis(cause_id=cause, reason=reason, evidence=evidence, cause_parameters=cause_params,
+                     sigma_nm=sigma, rmse=rmse, held_out=held_out, fit_runs=fit_runs, candidates=fits,
+                     scores=scores, features_r2=r2, nominal_model=nominal, bench_model=bench_model,
+                     calibrated_model=calibrated.model, extended_model=extended_model, campaign=campaign,
+                     calibrated_fit=calibrated, extended_fit=extended_fit, nominal_pred=nominal_rep.torque_sim,
+                     bench_info=bench_info or {}, calibration_info=calibration_info, timings=timings)
+
+
+def _evidence(cause, reason, sigma, rmse, scores, r2, params) -> str:
+    top = sorted(r2.items(), key=lambda kv: -kv[1])[:3]
+    follows = ", ".join(f"{k} (R² {v:.2f})" for k, v in top)
+    ranked = "; ".join(f"{s.id} {s.rmse:.1f} N·m (z={s.z_stat:.1f}, explains {100 * s.explained:.0f} %)"
+                       for s in scores[:3])
+    base = (f"On the held-out runs the calibrated baseline has RMSE {rmse['calibrated']:.2f} N·m against a "
+            f"sensor-noise level of {sigma:.2f} N·m estimated from the data (nominal RC-1: "
+            f"{rmse['nominal']:.2f} N·m). Its residual follows {follows}. Best refitted candidates: {ranked}.")
+    if cause == "none":
+        return base + f" Verdict none: {reason}; no structural discrepancy beyond noise and calibration."
+    if cause == "unexplained":
+        return base + f" Verdict unexplained: {reason}."
+    pstr = ", ".join(f"{k} = {v:.4g}" for k, v in params.items())
+    return (base + f" Verdict {cause} ({pstr}): {reason}; the extended model's held-out RMSE is "
+            f"{rmse['extended']:.2f} N·m.")

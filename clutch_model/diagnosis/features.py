@@ -1,0 +1,159 @@
+"""What the residual follows: the evidence behind a diagnosis.
+
+Residual r = measured - predicted torque of the calibrated baseline. Each feature is a
+signal on the campaign grid; we report how much of the residual's variance a small
+regression on it explains (R^2, on the held-out runs, with coefficients fitted on the fit runs),
+plus the classic views: lag cross-correlation, hysteresis loops, drift over the campaign.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..runs import Campaign
+
+
+def noise_sigma(residual: np.ndarray, run_start: np.ndarray) -> float:
+    """Sensor-noise level from the data: robust (MAD) scale of the first differences of the
+    residual, / sqrt(2). Slow structure (calibration error, drift, offsets) cancels in the
+    differences; isolated steps are outliers the median ignores."""
+    r = np.asarray(residual, float)
+    d = np.diff(r)
+    ok = np.isfinite(d) & ~run_start[1:]
+    d = d[ok]
+    if d.size < 10:
+        return math.nan
+    mad = np.median(np.abs(d - np.median(d)))
+    return float(1.4826 * mad / math.sqrt(2.0))
+
+
+def _per_run_gradient(y, t, run_start):
+    out = np.zeros_like(y)
+    starts = np.flatnonzero(run_start)
+    ends = np.append(starts[1:], y.size)
+    for a, b in zip(starts, ends):
+        if b - a > 2:
+            out[a:b] = np.gradient(y[a:b], t[a:b])
+    return out
+
+
+def _smooth(y, run_start, width):
+    """Centered moving average per run."""
+    out = np.empty_like(y)
+    starts = np.flatnonzero(run_start)
+    ends = np.append(starts[1:], y.size)
+    k = np.ones(width) / width
+    for a, b in zip(starts, ends):
+        seg = y[a:b]
+        if seg.size >= width:
+            pad = np.pad(seg, (width // 2, width - 1 - width // 2), mode="edge")
+            out[a:b] = np.convolve(pad, k, mode="valid")
+        else:
+            out[a:b] = seg.mean()
+    return out
+
+
+@dataclass
+class FeatureSet:
+    names: list
+    columns: dict           # name -> (n, k) design block
+
+
+def feature_signals(campaign: Campaign, sim, energy_j: np.ndarray) -> dict:
+    """Signals a residual may follow, each as a design block (columns)."""
+    c = campaign
+    t, f, w = c.t, np.maximum(c.force, 0.0), c.slip
+    theta = sim.pack_temperature_c
+    torque = sim.torque_nm
+    dfdt = _per_run_gradient(_smooth(f, c.run_start, 5), t, c.run_start)
+    # direction of the last force change (hysteresis memory): +1 after a rise, -1 after a fall
+    direction = np.zeros_like(f)
+    for a, b in _segments(c.run_start):
+        last = 0.0
+        for k in range(a, b):
+            if dfdt[k] > 2e3:
+                last = 1.0
+            elif dfdt[k] < -2e3:
+                last = -1.0
+            direction[k] = last
+    angle = np.zeros_like(w)
+    for a, b in _segments(c.run_start):
+        dt = np.diff(t[a:b], prepend=t[a])
+        angle[a:b] = np.cumsum(w[a:b] * dt)
+    p_mpa = sim.pressure_mpa
+    scale_t = max(np.nanstd(torque), 1e-9)
+    return {
+        "constant offset": np.ones((t.size, 1)),
+        "torque level": torque[:, None] / scale_t,
+        "force": f[:, None] / max(f.max(), 1.0),
+        "force rate dF/dt": dfdt[:, None] / max(np.abs(dfdt).max(), 1.0),
+        "force direction (hysteresis)": (direction * f)[:, None] / max(f.max(), 1.0),
+        "slip speed": w[:, None] / max(np.abs(w).max(), 1e-9),
+        "pack temperature": (theta - 60.0)[:, None] / 100.0,
+        "dissipated energy (campaign)": (energy_j / max(energy_j.max(), 1.0) * torque)[:, None] / scale_t,
+        "pressure x temperature": (p_mpa * (theta - 60.0) / 100.0 * torque)[:, None] / scale_t,
+        "slip angle (once per rev)": np.column_stack([np.sin(angle), np.cos(angle)]) * torque[:, None] / scale_t,
+        "time in run": _time_in_run(t, c.run_start)[:, None],
+    }
+
+
+def _segments(run_start):
+    starts = np.flatnonzero(run_start)
+    ends = np.append(starts[1:], run_start.size)
+    return list(zip(starts, ends))
+
+
+def _time_in_run(t, run_start):
+    out = np.empty_like(t)
+    for a, b in _segments(run_start):
+        out[a:b] = (t[a:b] - t[a]) / max(t[b - 1] - t[a], 1e-9)
+    return out
+
+
+def explained_variance(residual, features: dict, fit_mask, eval_mask) -> dict:
+    """R^2 on the eval rows of the residual regressed (on fit rows) on each feature block."""
+    out = {}
+    ok_fit = fit_mask & np.isfinite(residual)
+    ok_eval = eval_mask & np.isfinite(residual)
+    r_eval = residual[ok_eval]
+    denom = float(np.sum((r_eval - 0.0) ** 2))
+    for name, X in features.items():
+        A = X[ok_fit]
+        if name != "constant offset":
+            A = np.column_stack([A, np.ones(A.shape[0])])
+            B = np.column_stack([X[ok_eval], np.ones(int(ok_eval.sum()))])
+        else:
+            B = X[ok_eval]
+        coef, *_ = np.linalg.lstsq(A, residual[ok_fit], rcond=None)
+        pred = B @ coef
+        out[name] = max(0.0, 1.0 - float(np.sum((r_eval - pred) ** 2)) / denom) if denom > 0 else 0.0
+    return out
+
+
+def lag_cross_correlation(measured, predicted, run_start, dt, max_lag_s=0.5):
+    """Lag (s) maximising the correlation of the measured torque's derivative with the
+    predicted one's (positive: the measurement lags the model)."""
+    lags = np.arange(-int(max_lag_s / dt), int(max_lag_s / dt) + 1)
+    m = np.nan_to_num(np.diff(measured))
+    p = np.nan_to_num(np.diff(predicted))
+    keep = ~run_start[1:]
+    m = np.where(keep, m, 0.0)
+    p = np.where(keep, p, 0.0)
+    corr = np.array([np.dot(m[max(0, L):m.size + min(0, L)], p[max(0, -L):p.size - max(0, L)]) for L in lags])
+    norm = np.sqrt(np.dot(m, m) * np.dot(p, p)) or 1.0
+    corr = corr / norm
+    return lags * dt, corr
+
+
+def drift_per_run(campaign: Campaign, residual, predicted):
+    """Per run: mean residual relative to the mean predicted torque (a drift indicator)."""
+    rows = []
+    for r, sl in campaign.slices():
+        res = residual[sl]
+        ok = np.isfinite(res)
+        pred = predicted[sl][ok]
+        rows.append((r.name, float(np.mean(res[ok])) if ok.any() else math.nan,
+                     float(np.mean(res[ok]) / max(np.mean(np.abs(pred)), 1e-9)) if ok.any() else math.nan))
+    return rows

@@ -1,0 +1,211 @@
+"""Joint fits of a candidate mechanism and a small friction correction on car runs.
+
+Every candidate (and the baseline, with no mechanism) is refitted the same way so that
+their held-out errors compare like with like: the mechanism's physical parameters plus a
+4-parameter additive friction correction
+
+    mu_f += d0 + d1 (theta - 60)/100 + d2 (P - 3)/3 + d3 w/10,
+
+which is exact in the polynomial coefficients (adding the same term to mu_C and mu_S adds it
+to mu_f; the w term goes to k_V). Residuals are measured minus predicted *measured* torque on
+the fit runs only; the whole campaign is always simulated (in time order) so that state that
+carries between runs (dissipated energy) sees every run's inputs. Jacobians are forward
+differences computed as one parallel batch of perturbed parameter sets.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from .. import kernels as K
+from ..mechanisms import CATALOG, delay_signal, make_mechanism
+from ..params import FRICTION_A, ClutchModel
+from ..runs import Campaign
+
+N_CORR = 4
+
+
+def apply_friction_correction(a: np.ndarray, delta) -> np.ndarray:
+    """Coefficients a0..a19 with the additive friction correction folded in."""
+    d0, d1, d2, d3 = delta
+    a = np.array(a, dtype=float)
+    const = d0 - 0.6 * d1 - d2
+    for base in (0, 5):          # mu_C and mu_S
+        a[base] += const
+        a[base + 1] += d2 / 3.0  # P
+        a[base + 3] += d1 / 100.0  # theta
+    a[15] += d3 / 10.0           # k_V: w
+    return a
+
+
+@dataclass
+class ParamSpec:
+    """How a mechanism parameter is searched: transform, bounds and a start grid."""
+    name: str
+    log: bool
+    lo: float
+    hi: float
+    grid: np.ndarray
+
+    def to_x(self, v):
+        return math.log(v) if self.log else float(v)
+
+    def from_x(self, x):
+        return math.exp(x) if self.log else float(x)
+
+
+def search_space(mech_id: str, campaign: Campaign, energy_total_j: float, torque_scale: float):
+    """Physical search ranges of each catalog mechanism (start grids span what a car shows)."""
+    fmax = float(np.nanmax(campaign.force)) if campaign.force.size else 1e4
+    if mech_id == "actuator_lag":
+        return [ParamSpec("tau_s", True, 1e-4, 2.0, np.geomspace(0.005, 1.0, 10))]
+    if mech_id == "actuator_hysteresis":
+        return [ParamSpec("ratio", True, 1e-4, 0.9, np.geomspace(0.005, 0.5, 10))]
+    if mech_id == "spring_preload":
+        hi = max(fmax, 100.0)
+        return [ParamSpec("preload_n", True, 1.0, hi, np.geomspace(20.0, 0.5 * hi, 10))]
+    if mech_id == "friction_degradation":
+        e = max(energy_total_j, 1.0)
+        return [ParamSpec("energy_scale_j", True, 1e-3 * e, 1e6 * e, e * np.geomspace(0.3, 300.0, 10))]
+    if mech_id == "torque_offset":
+        s = max(torque_scale, 1.0)
+        return [ParamSpec("offset_nm", False, -s, s, np.linspace(-0.2 * s, 0.2 * s, 11))]
+    if mech_id == "transport_delay":
+        return [ParamSpec("delay_s", True, 1e-4, 2.0, np.geomspace(0.003, 0.8, 12))]
+    if mech_id == "drag_torque":
+        wmax = max(float(np.nanmax(np.abs(campaign.slip))), 0.1)
+        s = max(torque_scale, 1.0) / wmax
+        return [ParamSpec("coeff_nm_per_rad_s", False, -s, s, np.linspace(-0.2 * s, 0.2 * s, 11))]
+    raise KeyError(mech_id)
+
+
+@dataclass
+class CandidateFit:
+    id: str                      # mechanism id, or "baseline"
+    model: ClutchModel
+    parameters: dict
+    friction_correction: np.ndarray
+    fit_rmse_nm: float
+    held_out_rmse_nm: float = math.nan
+    residual: np.ndarray = field(default=None, repr=False)   # measured - predicted, whole campaign
+    predicted: np.ndarray = field(default=None, repr=False)
+    evaluations: int = 0
+
+
+class CampaignObjective:
+    """Builds models from a parameter vector x and evaluates residuals in batches."""
+
+    def __init__(self, base: ClutchModel, campaign: Campaign, fit_mask: np.ndarray, mech_id: str | None,
+                 specs, fit_friction: bool = True):
+        self.base = base
+        self.campaign = campaign
+        self.mask = fit_mask & np.isfinite(campaign.torque_measured)
+        self.mech_id = mech_id
+        self.specs = specs or []
+        self.fit_friction = fit_friction
+        self.a0 = base.friction_coefficients
+        self.n_mech = len(self.specs)
+        self.evaluations = 0
+        self._cache_x = None
+        self._cache_r = None
+        c = campaign
+        self._inputs = (np.ascontiguousarray(c.t), np.ascontiguousarray(c.force), np.ascontiguousarray(c.slip),
+                        np.ascontiguousarray(c.sump), np.ascontiguousarray(c.run_start))
+
+    def model_at(self, x) -> ClutchModel:
+        x = np.asarray(x, dtype=float)
+        mechs = [m for m in self.base.mechanisms if m.id != self.mech_id]
+        if self.mech_id is not None:
+            values = {s.name: s.from_x(x[j]) for j, s in enumerate(self.specs)}
+            mechs.append(make_mechanism(self.mech_id, **values))
+        delta = x[self.n_mech:] if self.fit_friction else np.zeros(N_CORR)
+        return self.base.with_friction(a=apply_friction_correction(self.a0, delta)).with_mechanisms(mechs)
+
+    def predict(self, xs) -> np.ndarray:
+        """Predicted measured torque on the whole campaign for each row of xs."""
+        models = [self.model_at(x) for x in xs]
+        pm = np.ascontiguousarray(np.stack([m.vector() for m in models]))
+        torque, _ = K.run_batch(pm, *self._inputs, 0.0)
+        self.evaluations += len(models)
+        out = np.empty_like(torque)
+        for j, m in enumerate(models):
+            y = torque[j]
+            for mech in m.mechanisms:
+                if mech.kind == "measurement":
+                    y = mech.apply_to_measurement(self.campaign.t, y, self.campaign.run_start)
+            out[j] = y
+        return out
+
+    def residuals(self, x) -> np.ndarray:
+        x = np.asarray(x, dtype=float)
+        if self._cache_x is not None and np.array_equal(x, self._cache_x):
+            return self._cache_r
+        pred = self.predict([x])[0]
+        r = (self.campaign.torque_measured - pred)[self.mask]
+        self._cache_x, self._cache_r = x.copy(), r
+        return r
+
+    def jacobian(self, x) -> np.ndarray:
+        x = np.asarray(x, dtype=float)
+        r0 = self.residuals(x)
+        steps = np.where(np.arange(x.size) < self.n_mech, 1e-3 * np.maximum(np.abs(x), 1.0), 1e-4)
+        for j, s in enumerate(self.specs):
+            lo, hi = (math.log(s.lo), math.log(s.hi)) if s.log else (s.lo, s.hi)
+            if x[j] + steps[j] > hi:
+                steps[j] = -steps[j]
+        xs = np.repeat(x[None, :], x.size, axis=0) + np.diag(steps)
+        preds = self.predict(xs)
+        rs = (self.campaign.torque_measured[None, :] - preds)[:, self.mask]
+        return ((rs - r0[None, :]) / steps[:, None]).T
+
+    def bounds(self):
+        lo = [math.log(s.lo) if s.log else s.lo for s in self.specs]
+        hi = [math.log(s.hi) if s.log else s.hi for s in self.specs]
+        if self.fit_friction:
+            lo += [-0.3, -0.3, -0.3, -0.3]
+            hi += [0.3, 0.3, 0.3, 0.3]
+        return np.array(lo), np.array(hi)
+
+
+def _rmse(r):
+    return float(np.sqrt(np.mean(r ** 2))) if r.size else math.nan
+
+
+def fit_candidate(base: ClutchModel, campaign: Campaign, fit_mask: np.ndarray, mech_id: str | None,
+                  energy_total_j: float, torque_scale: float, fit_friction: bool = True,
+                  max_nfev: int = 40) -> CandidateFit:
+    """Fit one candidate (mech_id=None: the baseline with the friction correction only)."""
+    specs = search_space(mech_id, campaign, energy_total_j, torque_scale) if mech_id else []
+    obj = CampaignObjective(base, campaign, fit_mask, mech_id, specs, fit_friction)
+    n_corr = N_CORR if fit_friction else 0
+    lo, hi = obj.bounds()
+    # start: the best point of the mechanism's grid (friction correction at 0), one batch
+    if specs:
+        grid = np.array([[s.to_x(v) for v in s.grid] for s in specs]).T  # 1-parameter mechanisms
+        xs = np.hstack([grid, np.zeros((grid.shape[0], n_corr))])
+        preds = obj.predict(xs)
+        sse = np.nansum(((campaign.torque_measured[None, :] - preds)[:, obj.mask]) ** 2, axis=1)
+        x0 = xs[int(np.argmin(sse))]
+    else:
+        x0 = np.zeros(n_corr)
+    x0 = np.clip(x0, lo + 1e-12, hi - 1e-12)
+    if x0.size:
+        sol = least_squares(obj.residuals, x0, jac=obj.jacobian, bounds=(lo, hi), method="trf",
+                            x_scale="jac", max_nfev=max_nfev, xtol=1e-8, ftol=1e-8)
+        x = sol.x
+    else:
+        x = x0
+    model = obj.model_at(x)
+    pred = obj.predict([x])[0]
+    resid = campaign.torque_measured - pred
+    params = {s.name: s.from_x(x[j]) for j, s in enumerate(specs)}
+    return CandidateFit(id=mech_id or "baseline", model=model, parameters=params,
+                        friction_correction=x[len(specs):] if fit_friction else np.zeros(N_CORR),
+                        fit_rmse_nm=_rmse(resid[obj.mask]), residual=resid, predicted=pred,
+                        evaluations=obj.evaluations)
+
+
+CANDIDATE_IDS = list(CATALOG)
