@@ -1,0 +1,220 @@
+"""report.json, report.html and the evidence plots of a diagnosis."""
+from __future__ import annotations
+
+import html
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from ..params import save_model
+from . import features as F
+from .engine import Diagnosis
+
+
+def _finite(x):
+    if isinstance(x, dict):
+        return {k: _finite(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_finite(v) for v in x]
+    if isinstance(x, (float, np.floating)):
+        return float(x) if math.isfinite(x) else None
+    if isinstance(x, np.integer):
+        return int(x)
+    return x
+
+
+def report_dict(d: Diagnosis) -> dict:
+    cand = []
+    score = {s.id: s for s in d.scores}
+    for f in d.candidates:
+        s = score.get(f.id)
+        cand.append({"id": f.id, "held_out_rmse_nm": f.held_out_rmse_nm, "fit_rmse_nm": f.fit_rmse_nm,
+                     "parameters": f.parameters,
+                     "friction_correction": [float(v) for v in f.friction_correction],
+                     "explained_fraction": s.explained if s else None,
+                     "z": s.z_stat if s else None, "block_t": s.t_stat if s else None,
+                     "significant": s.significant if s else None})
+    return _finite({
+        "cause": {"id": d.cause_id, "evidence": d.evidence, "parameters": d.cause_parameters},
+        "rmse_nm": {"nominal": d.rmse["nominal"], "calibrated": d.rmse["calibrated"],
+                    "extended": d.rmse["extended"], "bench_fit": d.rmse["bench"]},
+        "gain_pct": d.gain_pct,
+        "held_out_runs": d.held_out,
+        "fit_runs": d.fit_runs,
+        "split": "every third run from the second, in log-time order (interleaved over the campaign "
+                 "so drift, temperatures and slip levels are on both sides); held-out inputs still "
+                 "drive the campaign's carried state, their torque is never fitted",
+        "noise_sigma_nm": d.sigma_nm,
+        "candidates": cand,
+        "residual_features_r2": d.features_r2,
+        "bench_fit": d.bench_info,
+        "calibration": d.calibration_info,
+        "timings_s": d.timings,
+    })
+
+
+def _plots(d: Diagnosis, out: Path) -> list:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    c = d.campaign
+    files = []
+    held = np.isin(c.run_index, [c.names.index(n) for n in d.held_out])
+    cal_pred = d.calibrated_fit.predicted
+    ext_pred = d.extended_fit.predicted if d.extended_fit else cal_pred
+    resid = d.calibrated_fit.residual
+
+    # 1. held-out runs: measured vs models
+    runs = [r for r in c.runs if r.name in d.held_out]
+    fig, axes = plt.subplots(len(runs), 1, figsize=(10, 2.6 * len(runs)), squeeze=False)
+    for ax, (r, sl) in zip(axes[:, 0], [(r, sl) for r, sl in c.slices() if r.name in d.held_out]):
+        ax.plot(r.t, c.torque_measured[sl], ".", ms=1.5, color="0.5", label="measured")
+        ax.plot(r.t, d.nominal_pred[sl], lw=1, color="tab:orange", label="nominal RC-1")
+        ax.plot(r.t, cal_pred[sl], lw=1, color="tab:blue", label="calibrated")
+        if d.extended_fit:
+            ax.plot(r.t, ext_pred[sl], lw=1, color="tab:green", label=f"extended ({d.cause_id})")
+        ax.set_title(f"held-out run {r.name}", fontsize=9)
+        ax.set_ylabel("torque [N·m]")
+    axes[0, 0].legend(fontsize=7, loc="upper right")
+    axes[-1, 0].set_xlabel("t [s]")
+    fig.tight_layout()
+    fig.savefig(out / "torque_held_out.png", dpi=90)
+    plt.close(fig)
+    files.append(("torque_held_out.png", "Held-out runs: measured torque and the models"))
+
+    # 2. residual against the candidate features
+    sim = d.calibrated_fit
+    fr = F.feature_signals(c, _sim_of(d), _sim_of(d).energy_j)
+    dfdt = fr["force rate dF/dt"][:, 0]
+    theta = _sim_of(d).pack_temperature_c
+    energy = _sim_of(d).energy_j
+    panels = [("t (campaign order) [s]", _campaign_time(c)), ("applied force [N]", c.force),
+              ("force rate (normalised)", dfdt), ("slip speed [rad/s]", c.slip),
+              ("pack temperature [°C]", theta), ("dissipated energy [J]", energy)]
+    fig, axes = plt.subplots(2, 3, figsize=(12, 6))
+    for ax, (label, x) in zip(axes.ravel(), panels):
+        ax.plot(x[~held], resid[~held], ".", ms=1, alpha=0.3, color="tab:blue", label="fit runs")
+        ax.plot(x[held], resid[held], ".", ms=1, alpha=0.3, color="tab:red", label="held-out")
+        ax.axhline(0, color="k", lw=0.5)
+        ax.set_xlabel(label, fontsize=8)
+        ax.set_ylabel("residual [N·m]", fontsize=8)
+    axes[0, 0].legend(fontsize=7, markerscale=8)
+    fig.suptitle("Calibrated baseline: residual (measured − simulated) against what it might follow", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(out / "residuals.png", dpi=90)
+    plt.close(fig)
+    files.append(("residuals.png", "Residual of the calibrated baseline against time, force, force rate, slip, temperature and energy"))
+
+    # 3. lag cross-correlation and 4. hysteresis loops and 5. drift
+    fig, axes = plt.subplots(1, 3, figsize=(13, 3.8))
+    dt = float(np.median(np.diff(c.t[~c.run_start]))) if c.t.size > 2 else 0.005
+    lags, corr = F.lag_cross_correlation(c.torque_measured, cal_pred, c.run_start, dt)
+    axes[0].plot(lags * 1e3, corr)
+    k = int(np.argmax(corr))
+    axes[0].axvline(lags[k] * 1e3, color="r", lw=0.8)
+    axes[0].set_title(f"lag cross-correlation: peak at {lags[k] * 1e3:.0f} ms", fontsize=9)
+    axes[0].set_xlabel("lag of measured vs simulated [ms]")
+    r0, sl0 = next((r, sl) for r, sl in c.slices() if r.name == d.held_out[0])
+    axes[1].plot(c.force[sl0], c.torque_measured[sl0], ".", ms=1.5, color="0.5", label="measured")
+    axes[1].plot(c.force[sl0], cal_pred[sl0], lw=0.8, color="tab:blue", label="calibrated")
+    axes[1].set_title(f"torque vs force, run {r0.name} (hysteresis loop)", fontsize=9)
+    axes[1].set_xlabel("applied force [N]")
+    axes[1].set_ylabel("torque [N·m]")
+    axes[1].legend(fontsize=7)
+    drift = F.drift_per_run(c, resid, cal_pred)
+    e_end = [float(energy[sl][-1]) for _, sl in c.slices()]
+    colors = ["tab:red" if name in d.held_out else "tab:blue" for name, *_ in drift]
+    axes[2].scatter(e_end, [100 * x[2] for x in drift], c=colors)
+    axes[2].axhline(0, color="k", lw=0.5)
+    axes[2].set_title("drift over the campaign (red: held-out)", fontsize=9)
+    axes[2].set_xlabel("dissipated energy at run end [J]")
+    axes[2].set_ylabel("mean residual / mean torque [%]")
+    fig.tight_layout()
+    fig.savefig(out / "lag_hysteresis_drift.png", dpi=90)
+    plt.close(fig)
+    files.append(("lag_hysteresis_drift.png", "Lag cross-correlation, torque-vs-force loop, drift per run"))
+
+    # 6. candidates
+    fig, ax = plt.subplots(figsize=(8, 3.2))
+    ids = [f.id for f in d.candidates]
+    vals = [f.held_out_rmse_nm for f in d.candidates]
+    ax.barh(ids, vals, color=["tab:green" if i == d.cause_id else "0.6" for i in ids])
+    ax.axvline(d.rmse["calibrated"], color="tab:blue", lw=1, label="calibrated baseline")
+    ax.axvline(d.sigma_nm, color="k", ls="--", lw=1, label="noise level")
+    ax.set_xlabel("held-out RMSE [N·m]")
+    ax.invert_yaxis()
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(out / "candidates.png", dpi=90)
+    plt.close(fig)
+    files.append(("candidates.png", "Held-out RMSE of every refitted candidate"))
+    return files
+
+
+def _sim_of(d: Diagnosis):
+    if not hasattr(d, "_cal_sim"):
+        from ..replay import replay_runs
+        d._cal_sim = replay_runs(d.calibrated_model, d.campaign).sim
+    return d._cal_sim
+
+
+def _campaign_time(c):
+    out = np.empty_like(c.t)
+    offset = 0.0
+    for r, sl in c.slices():
+        out[sl] = r.t - r.t[0] + offset
+        offset = out[sl][-1] + 1.0
+    return out
+
+
+def write_report(d: Diagnosis, out_dir) -> dict:
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    rep = report_dict(d)
+    save_model(d.calibrated_model, out / "calibrated_model.yaml",
+               header="clutch-sim diagnose: calibrated baseline (bench fit + car calibration)")
+    save_model(d.extended_model, out / "extended_model.yaml",
+               header=f"clutch-sim diagnose: extended model, cause = {d.cause_id}")
+    (out / "report.json").write_text(json.dumps(rep, indent=2, allow_nan=False))
+    files = _plots(d, out)
+    (out / "report.html").write_text(_html(d, rep, files))
+    return rep
+
+
+def _html(d: Diagnosis, rep: dict, files) -> str:
+    e = html.escape
+    verdict = {"none": "No structural discrepancy beyond noise and calibration",
+               "unexplained": "Structure that no known mechanism explains"}.get(d.cause_id, f"Cause: {d.cause_id}")
+    params = ", ".join(f"{e(str(k))} = {e(f'{v:.4g}' if isinstance(v, float) else str(v))}"
+                       for k, v in d.cause_parameters.items())
+    rows = []
+    for c in rep["candidates"]:
+        expl = "" if c["explained_fraction"] is None else f"{100 * c['explained_fraction']:.0f} %"
+        z = "" if c["z"] is None else f"{c['z']:.1f}"
+        pars = ", ".join(f"{k}={v:.4g}" for k, v in c["parameters"].items())
+        cls = " class=win" if c["id"] == d.cause_id else ""
+        rows.append(f"<tr{cls}><td>{e(c['id'])}</td><td>{c['held_out_rmse_nm']:.2f}</td>"
+                    f"<td>{c['fit_rmse_nm']:.2f}</td><td>{expl}</td><td>{z}</td><td>{e(pars)}</td></tr>")
+    rows = "".join(rows)
+    r = rep["rmse_nm"]
+    imgs = "".join(f"<figure><img src='{e(f)}' alt='{e(cap)}'><figcaption>{e(cap)}</figcaption></figure>"
+                   for f, cap in files)
+    return f"""<!doctype html><html><head><meta charset="utf-8"><title>clutch-sim diagnosis</title>
+<style>body{{font-family:sans-serif;max-width:1100px;margin:1em auto;color:#222}}
+.verdict{{font-size:1.5em;padding:.5em;background:#eef5ee;border-left:6px solid #2a2}}
+table{{border-collapse:collapse}}td,th{{border:1px solid #ccc;padding:3px 8px;text-align:right}}
+td:first-child{{text-align:left}}tr.win{{background:#dfd}}img{{max-width:100%}}</style></head><body>
+<div class="verdict">{e(verdict)}{(' — ' + params) if params else ''}</div>
+<p><b>Gain on held-out runs:</b> RMSE {r['calibrated']:.2f} → {r['extended']:.2f} N·m
+({rep['gain_pct']:.1f} %); nominal RC-1 {r['nominal']:.2f} N·m; noise level {d.sigma_nm:.2f} N·m (estimated from the data).</p>
+<p>{e(d.evidence)}</p>
+<p><b>Held-out runs:</b> {e(', '.join(d.held_out))} — {e(rep['split'])}.</p>
+<h3>Candidates (each refitted with the same friction correction as the baseline)</h3>
+<table><tr><th>id</th><th>held-out RMSE [N·m]</th><th>fit RMSE</th><th>explains</th><th>z</th><th>parameters</th></tr>
+{rows}</table>
+<h3>Evidence</h3>{imgs}
+<p style="color:#777">Files: report.json, calibrated_model.yaml, extended_model.yaml.</p>
+</body></html>"""
