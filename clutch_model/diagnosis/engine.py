@@ -102,6 +102,9 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
     bench_rep = replay_runs(bench_model, campaign)
     energy_total = float(bench_rep.sim.energy_j[-1] + bench_rep.sim.power_w[-1] * 0.0)
     torque_scale = float(np.nanpercentile(np.abs(campaign.torque_measured), 95))
+    sigma_guess = F.noise_sigma(campaign.torque_measured - bench_rep.torque_sim, campaign.run_start)
+    if not np.isfinite(sigma_guess) or sigma_guess <= 0:
+        sigma_guess = max(1e-3 * torque_scale, 1e-6)
     timings["simulate nominal"] = time.perf_counter() - tick
 
     # calibration on the fit runs: optional regression + Monte Carlo, then the shared correction
@@ -112,7 +115,8 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
         cal_base, calibration_info = calibrate(bench_model, campaign.subset(fit_runs))
     t0 = time.perf_counter()
     say("fitting the baseline friction correction")
-    calibrated = fit_candidate(cal_base, campaign, fit_mask, None, energy_total, torque_scale)
+    calibrated = fit_candidate(cal_base, campaign, fit_mask, None, energy_total, torque_scale,
+                               noise_sigma_nm=sigma_guess)
     timings["calibrate"] = time.perf_counter() - t0
 
     resid0 = calibrated.residual
@@ -126,7 +130,8 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
     t0 = time.perf_counter()
     for cid in ids:
         say(f"fitting candidate {cid}")
-        fit = fit_candidate(cal_base, campaign, fit_mask, cid, energy_total, torque_scale)
+        fit = fit_candidate(cal_base, campaign, fit_mask, cid, energy_total, torque_scale,
+                            noise_sigma_nm=sigma_guess)
         fit.held_out_rmse_nm = _rmse(fit.residual, eval_mask)
         fits.append(fit)
     timings["candidates"] = time.perf_counter() - t0
@@ -140,7 +145,7 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
     # features of the calibrated residual (evidence)
     sim_cal = replay_runs(calibrated.model, campaign).sim
     feats = F.feature_signals(campaign, sim_cal, sim_cal.energy_j)
-    r2 = F.explained_variance(resid0, feats, fit_mask, eval_mask)
+    r2 = F.explained_variance(resid0, feats, campaign.run_index)
 
     extended_fit = None
     extended_model = calibrated.model

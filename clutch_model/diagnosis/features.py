@@ -112,23 +112,29 @@ def _time_in_run(t, run_start):
     return out
 
 
-def explained_variance(residual, features: dict, fit_mask, eval_mask) -> dict:
-    """R^2 on the eval rows of the residual regressed (on fit rows) on each feature block."""
+PER_RUN_FEATURES = ("slip angle (once per rev)",)
+
+
+def explained_variance(residual, features: dict, run_index) -> dict:
+    """Share of the residual's variance (about zero) that a least-squares fit on each feature
+    block explains, over the whole campaign (evidence, not a test). Phase-like features
+    (slip angle) get their coefficients per run: their phase is arbitrary from run to run."""
     out = {}
-    ok_fit = fit_mask & np.isfinite(residual)
-    ok_eval = eval_mask & np.isfinite(residual)
-    r_eval = residual[ok_eval]
-    denom = float(np.sum((r_eval - 0.0) ** 2))
+    ok = np.isfinite(residual)
+    r = residual[ok]
+    denom = float(np.dot(r, r))
+    runs = run_index[ok]
     for name, X in features.items():
-        A = X[ok_fit]
+        A = X[ok]
         if name != "constant offset":
             A = np.column_stack([A, np.ones(A.shape[0])])
-            B = np.column_stack([X[ok_eval], np.ones(int(ok_eval.sum()))])
-        else:
-            B = X[ok_eval]
-        coef, *_ = np.linalg.lstsq(A, residual[ok_fit], rcond=None)
-        pred = B @ coef
-        out[name] = max(0.0, 1.0 - float(np.sum((r_eval - pred) ** 2)) / denom) if denom > 0 else 0.0
+        pred = np.zeros_like(r)
+        groups = np.unique(runs) if name in PER_RUN_FEATURES else [None]
+        for g in groups:
+            sel = slice(None) if g is None else (runs == g)
+            coef, *_ = np.linalg.lstsq(A[sel], r[sel], rcond=None)
+            pred[sel] = A[sel] @ coef
+        out[name] = max(0.0, 1.0 - float(np.sum((r - pred) ** 2)) / denom) if denom > 0 else 0.0
     return out
 
 

@@ -1,13 +1,16 @@
 """Joint fits of a candidate mechanism and a small friction correction on car runs.
 
 Every candidate (and the baseline, with no mechanism) is refitted the same way so that
-their held-out errors compare like with like: the mechanism's physical parameters plus a
-4-parameter additive friction correction
+their held-out errors compare like with like: the mechanism's physical parameters plus an
+additive friction correction within the thesis' polynomial structure,
 
-    mu_f += d0 + d1 (theta - 60)/100 + d2 (P - 3)/3 + d3 w/10,
+    mu_C, mu_S += c0 + c1 p + c2 p^2 + c3 q + c4 q^2         (mu_S - mu_C unchanged)
+    k_V        += (k0 + k1 p + k2 p^2 + k3 q + k4 q^2) / 10
+    p = P - 1 MPa,  q = (theta - 80 C) / 50 C,
 
-which is exact in the polynomial coefficients (adding the same term to mu_C and mu_S adds it
-to mu_f; the w term goes to k_V). Residuals are measured minus predicted *measured* torque on
+i.e. the 10 coefficients of mu_C and k_V that car runs (slip >> omega_S) can identify, moved
+in a well-conditioned basis; the correction is exact in a0..a19. A weak ridge keeps it small
+where the runs do not constrain it. Residuals are measured minus predicted *measured* torque on
 the fit runs only; the whole campaign is always simulated (in time order) so that state that
 carries between runs (dissipated energy) sees every run's inputs. Jacobians are forward
 differences computed as one parallel batch of perturbed parameter sets.
@@ -25,19 +28,31 @@ from ..mechanisms import CATALOG, delay_signal, make_mechanism
 from ..params import FRICTION_A, ClutchModel
 from ..runs import Campaign
 
-N_CORR = 4
+N_CORR = 10
+P_CENTER_MPA = 1.0
+THETA_CENTER_C, THETA_SCALE_C = 80.0, 50.0
+K_V_SCALE = 0.1
+RIDGE_SCALE = 0.05     # a correction of 0.05 in mu costs about one noise-level SSE
+
+
+def _quadratic_in_poly(block: np.ndarray, c, pc, ps, tc, ts):
+    """Add c0 + c1 p + c2 p^2 + c3 q + c4 q^2 (p=(P-pc)/ps, q=(theta-tc)/ts) to a polynomial
+    block [1, P, P^2, theta, theta^2] exactly."""
+    c0, c1, c2, c3, c4 = c
+    block[0] += c0 - c1 * pc / ps + c2 * pc * pc / ps ** 2 - c3 * tc / ts + c4 * tc * tc / ts ** 2
+    block[1] += c1 / ps - 2 * c2 * pc / ps ** 2
+    block[2] += c2 / ps ** 2
+    block[3] += c3 / ts - 2 * c4 * tc / ts ** 2
+    block[4] += c4 / ts ** 2
 
 
 def apply_friction_correction(a: np.ndarray, delta) -> np.ndarray:
     """Coefficients a0..a19 with the additive friction correction folded in."""
-    d0, d1, d2, d3 = delta
+    delta = np.asarray(delta, dtype=float)
     a = np.array(a, dtype=float)
-    const = d0 - 0.6 * d1 - d2
-    for base in (0, 5):          # mu_C and mu_S
-        a[base] += const
-        a[base + 1] += d2 / 3.0  # P
-        a[base + 3] += d1 / 100.0  # theta
-    a[15] += d3 / 10.0           # k_V: w
+    for base in (0, 5):          # mu_C and mu_S move together
+        _quadratic_in_poly(a[base:base + 5], delta[:5], P_CENTER_MPA, 1.0, THETA_CENTER_C, THETA_SCALE_C)
+    _quadratic_in_poly(a[15:20], delta[5:10] * K_V_SCALE, P_CENTER_MPA, 1.0, THETA_CENTER_C, THETA_SCALE_C)
     return a
 
 
@@ -99,7 +114,7 @@ class CampaignObjective:
     """Builds models from a parameter vector x and evaluates residuals in batches."""
 
     def __init__(self, base: ClutchModel, campaign: Campaign, fit_mask: np.ndarray, mech_id: str | None,
-                 specs, fit_friction: bool = True):
+                 specs, fit_friction: bool = True, noise_sigma_nm: float = 1.0):
         self.base = base
         self.campaign = campaign
         self.mask = fit_mask & np.isfinite(campaign.torque_measured)
@@ -108,6 +123,8 @@ class CampaignObjective:
         self.fit_friction = fit_friction
         self.a0 = base.friction_coefficients
         self.n_mech = len(self.specs)
+        n_fit = int(self.mask.sum())
+        self.ridge = math.sqrt(max(n_fit, 1)) * noise_sigma_nm / RIDGE_SCALE if fit_friction else 0.0
         self.evaluations = 0
         self._cache_x = None
         self._cache_r = None
@@ -145,6 +162,8 @@ class CampaignObjective:
             return self._cache_r
         pred = self.predict([x])[0]
         r = (self.campaign.torque_measured - pred)[self.mask]
+        if self.ridge:
+            r = np.concatenate([r, self.ridge * x[self.n_mech:]])
         self._cache_x, self._cache_r = x.copy(), r
         return r
 
@@ -159,14 +178,19 @@ class CampaignObjective:
         xs = np.repeat(x[None, :], x.size, axis=0) + np.diag(steps)
         preds = self.predict(xs)
         rs = (self.campaign.torque_measured[None, :] - preds)[:, self.mask]
-        return ((rs - r0[None, :]) / steps[:, None]).T
+        n = rs.shape[1]
+        jac = np.zeros((r0.size, x.size))
+        jac[:n] = ((rs - r0[None, :n]) / steps[:, None]).T
+        if self.ridge:
+            jac[n:, self.n_mech:] = self.ridge * np.eye(x.size - self.n_mech)
+        return jac
 
     def bounds(self):
         lo = [math.log(s.lo) if s.log else s.lo for s in self.specs]
         hi = [math.log(s.hi) if s.log else s.hi for s in self.specs]
         if self.fit_friction:
-            lo += [-0.3, -0.3, -0.3, -0.3]
-            hi += [0.3, 0.3, 0.3, 0.3]
+            lo += [-0.3] * N_CORR
+            hi += [0.3] * N_CORR
         return np.array(lo), np.array(hi)
 
 
@@ -176,10 +200,10 @@ def _rmse(r):
 
 def fit_candidate(base: ClutchModel, campaign: Campaign, fit_mask: np.ndarray, mech_id: str | None,
                   energy_total_j: float, torque_scale: float, fit_friction: bool = True,
-                  max_nfev: int = 40) -> CandidateFit:
+                  max_nfev: int = 40, noise_sigma_nm: float = 1.0) -> CandidateFit:
     """Fit one candidate (mech_id=None: the baseline with the friction correction only)."""
     specs = search_space(mech_id, campaign, energy_total_j, torque_scale) if mech_id else []
-    obj = CampaignObjective(base, campaign, fit_mask, mech_id, specs, fit_friction)
+    obj = CampaignObjective(base, campaign, fit_mask, mech_id, specs, fit_friction, noise_sigma_nm)
     n_corr = N_CORR if fit_friction else 0
     lo, hi = obj.bounds()
     # start: the best point of the mechanism's grid (friction correction at 0), one batch
