@@ -11,8 +11,6 @@ metadata). Magnitudes: see clutch_model.synth (module docstring).
 """
 from __future__ import annotations
 
-import argparse
-
 MECHANISM_IDS = ("actuator_lag", "actuator_hysteresis", "spring_preload", "friction_degradation",
                  "torque_offset", "transport_delay", "drag_torque")
 EXTRA_EFFECTS = ("torque_ripple", "pressure_temperature_cross")
@@ -26,12 +24,11 @@ def add_parser(subparsers) -> None:
         description="Virtual test car: simulate a seeded eLSD test campaign from a perturbed "
                     "reference clutch (optionally with a hidden mechanism or an effect outside "
                     "the catalog) and write noisy car-test bags, the SAE#2 bench table and the "
-                    "truth.",
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+                    "truth.")
     p.add_argument("--out", required=True, metavar="DIR", help="output directory")
-    p.add_argument("--seed", type=int, default=0, help="random seed (same seed, same files)")
-    p.add_argument("--runs", type=int, default=12, metavar="N", help="number of test runs (bags)")
-    p.add_argument("--duration", type=float, default=9.0, metavar="S", help="run duration, s")
+    p.add_argument("--seed", type=int, default=0, help="random seed; same seed, same files (default 0)")
+    p.add_argument("--runs", type=int, default=12, metavar="N", help="number of test runs = bags (default 12)")
+    p.add_argument("--duration", type=float, default=9.0, metavar="S", help="duration of a run, s (default 9)")
     g = p.add_mutually_exclusive_group()
     g.add_argument("--mechanism", choices=MECHANISM_IDS, default=None,
                    help="hidden catalog mechanism in the true car")
@@ -43,14 +40,14 @@ def add_parser(subparsers) -> None:
                         "default: a typical visible value")
     p.add_argument("--friction-spread", dest="friction_spread", type=float, default=0.05,
                    metavar="F", help="relative spread of the true friction coefficients around "
-                                     "the base model's (uniform +-F)")
+                                     "the base model's, uniform +-F (default 0.05)")
     p.add_argument("--torque-noise", dest="torque_noise", type=float, default=8.0, metavar="NM",
-                   help="torque sensor white noise sigma, N*m")
+                   help="torque sensor white-noise sigma, N*m (default 8)")
     p.add_argument("--pack-temperature", dest="pack_temperature", action="store_true",
                    help="also log /clutch/pack_temperature (10 Hz)")
-    p.add_argument("--storage", choices=("mcap", "sqlite3"), default="mcap", help="bag storage")
+    p.add_argument("--storage", choices=("mcap", "sqlite3"), default="mcap", help="bag storage (default mcap)")
     p.add_argument("--compression", choices=("none", "lz4"), default="none",
-                   help="MCAP chunk compression")
+                   help="MCAP chunk compression (default none)")
     add_params_option(p)
     p.set_defaults(func=run)
 
@@ -60,7 +57,8 @@ def run(args) -> int:
 
     from clutch_model.errors import ParamsError
     from clutch_model.params import load_model
-    from clutch_model.synth import CampaignSpec, synthesize_campaign, write_campaign
+    from clutch_model.synth import (CampaignSpec, check_output_dir, run_names,
+                                    synthesize_campaign, write_campaign)
 
     if args.magnitude is not None and not (args.mechanism or args.extra_effect):
         raise ParamsError("--magnitude needs --mechanism or --extra-effect")
@@ -73,6 +71,7 @@ def run(args) -> int:
                         torque_noise_nm=args.torque_noise,
                         include_pack_temperature=args.pack_temperature)
     spec.validate()
+    check_output_dir(args.out, run_names(spec.n_runs))
 
     def note(msg):
         print(f"synth: {msg}", file=sys.stderr)
