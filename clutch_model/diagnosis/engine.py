@@ -26,6 +26,8 @@ from . import features as F
 from .fitting import CANDIDATE_IDS, CandidateFit, fit_candidate
 from .verdict import blocks, decide, score_candidates
 
+JOINT_REFITS = 3
+
 
 def choose_held_out(names: list) -> list:
     """Every third run from the second (time order); one run when there are two or three."""
@@ -110,30 +112,41 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
     # calibration on the fit runs: optional regression + Monte Carlo, then the shared correction
     calibration_info = {}
     cal_base = bench_model
+    t0 = time.perf_counter()
     if calibrate is not None:
         say("calibrating friction on the fit runs (regression + Monte Carlo)")
         cal_base, calibration_info = calibrate(bench_model, campaign.subset(fit_runs))
+    timings["car calibration"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     say("fitting the baseline friction correction")
     calibrated = fit_candidate(cal_base, campaign, fit_mask, None, energy_total, torque_scale,
                                noise_sigma_nm=sigma_guess)
-    timings["calibrate"] = time.perf_counter() - t0
+    timings["friction correction"] = time.perf_counter() - t0
 
     resid0 = calibrated.residual
     sigma = F.noise_sigma(resid0, campaign.run_start)
     if not np.isfinite(sigma) or sigma <= 0:
         sigma = max(float(np.nanstd(resid0)) * 1e-3, 1e-9)
 
-    # candidates
-    fits = []
+    # candidates: every mechanism alone on the calibrated model (cheap, one parameter), then
+    # the JOINT_REFITS best on the fit runs refitted jointly with the friction correction
+    fits = {}
     ids = list(candidates) if candidates else CANDIDATE_IDS
     t0 = time.perf_counter()
     for cid in ids:
         say(f"fitting candidate {cid}")
-        fit = fit_candidate(cal_base, campaign, fit_mask, cid, energy_total, torque_scale,
-                            noise_sigma_nm=sigma_guess)
+        fits[cid] = fit_candidate(calibrated.model, campaign, fit_mask, cid, energy_total, torque_scale,
+                                  fit_friction=False, noise_sigma_nm=sigma_guess)
+    for cid in sorted(fits, key=lambda k: fits[k].fit_rmse_nm)[:JOINT_REFITS]:
+        say(f"refitting {cid} jointly with the friction correction")
+        joint = fit_candidate(cal_base, campaign, fit_mask, cid, energy_total, torque_scale,
+                              noise_sigma_nm=sigma_guess, start=fits[cid].parameters)
+        joint.joint = True
+        if joint.fit_rmse_nm <= fits[cid].fit_rmse_nm:
+            fits[cid] = joint
+    fits = list(fits.values())
+    for fit in fits:
         fit.held_out_rmse_nm = _rmse(fit.residual, eval_mask)
-        fits.append(fit)
     timings["candidates"] = time.perf_counter() - t0
     calibrated.held_out_rmse_nm = _rmse(resid0, eval_mask)
 

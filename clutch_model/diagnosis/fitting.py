@@ -105,6 +105,7 @@ class CandidateFit:
     friction_correction: np.ndarray
     fit_rmse_nm: float
     held_out_rmse_nm: float = math.nan
+    joint: bool = False          # refitted jointly with the friction correction
     residual: np.ndarray = field(default=None, repr=False)   # measured - predicted, whole campaign
     predicted: np.ndarray = field(default=None, repr=False)
     evaluations: int = 0
@@ -200,14 +201,16 @@ def _rmse(r):
 
 def fit_candidate(base: ClutchModel, campaign: Campaign, fit_mask: np.ndarray, mech_id: str | None,
                   energy_total_j: float, torque_scale: float, fit_friction: bool = True,
-                  max_nfev: int = 40, noise_sigma_nm: float = 1.0) -> CandidateFit:
+                  max_nfev: int = 40, noise_sigma_nm: float = 1.0, start: dict | None = None) -> CandidateFit:
     """Fit one candidate (mech_id=None: the baseline with the friction correction only)."""
     specs = search_space(mech_id, campaign, energy_total_j, torque_scale) if mech_id else []
     obj = CampaignObjective(base, campaign, fit_mask, mech_id, specs, fit_friction, noise_sigma_nm)
     n_corr = N_CORR if fit_friction else 0
     lo, hi = obj.bounds()
     # start: the best point of the mechanism's grid (friction correction at 0), one batch
-    if specs:
+    if specs and start:
+        x0 = np.concatenate([[s.to_x(start[s.name]) for s in specs], np.zeros(n_corr)])
+    elif specs:
         grid = np.array([[s.to_x(v) for v in s.grid] for s in specs]).T  # 1-parameter mechanisms
         xs = np.hstack([grid, np.zeros((grid.shape[0], n_corr))])
         preds = obj.predict(xs)
@@ -226,7 +229,7 @@ def fit_candidate(base: ClutchModel, campaign: Campaign, fit_mask: np.ndarray, m
     pred = obj.predict([x])[0]
     resid = campaign.torque_measured - pred
     params = {s.name: s.from_x(x[j]) for j, s in enumerate(specs)}
-    return CandidateFit(id=mech_id or "baseline", model=model, parameters=params,
+    return CandidateFit(id=mech_id or "baseline", model=model, parameters=params, joint=fit_friction,
                         friction_correction=x[len(specs):] if fit_friction else np.zeros(N_CORR),
                         fit_rmse_nm=_rmse(resid[obj.mask]), residual=resid, predicted=pred,
                         evaluations=obj.evaluations)

@@ -31,7 +31,7 @@ def report_dict(d: Diagnosis) -> dict:
     for f in d.candidates:
         s = score.get(f.id)
         cand.append({"id": f.id, "held_out_rmse_nm": f.held_out_rmse_nm, "fit_rmse_nm": f.fit_rmse_nm,
-                     "parameters": f.parameters,
+                     "parameters": f.parameters, "refit_with_friction": f.joint,
                      "friction_correction": [float(v) for v in f.friction_correction],
                      "explained_fraction": s.explained if s else None,
                      "z": s.z_stat if s else None, "block_t": s.t_stat if s else None,
