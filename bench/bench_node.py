@@ -1,6 +1,6 @@
 """Benchmark of the clutch_sim node at 1 kHz with a client in another process.
 
-    .venv/bin/python bench/bench_node.py [--seconds 12] [--rate 1000] [--executor single|events]
+    .venv/bin/python bench/bench_node.py [--seconds 12] [--rate 1000] [--executor single|multi]
                                          [--flood HZ] [--json OUT.json]
 
 Prints:
@@ -129,7 +129,8 @@ def run(seconds: float, rate: float, executor: str, flood_hz: float) -> dict:
     def on_diag(msg):
         for st in msg.status:
             if st.name.endswith(": timing"):
-                diags.append((time.monotonic(), values_of(st)))
+                stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+                diags.append((time.monotonic(), stamp, values_of(st)))
 
     client.create_subscription(ClutchState, "clutch_state", on_state, reliable)
     client.create_subscription(DiagnosticArray, "/diagnostics", on_diag, 10)
@@ -174,10 +175,8 @@ def run(seconds: float, rate: float, executor: str, flood_hz: float) -> dict:
             ex.spin_once(timeout_sec=0.05)
         if node_proc.poll() is not None:
             raise RuntimeError(f"node died with {node_proc.returncode}")
-        inside = [d for t, d in diags if t <= t0 + wall + 0.6]
-        first, last = inside[0], inside[-1]
-        t_first = next(t for t, d in diags if d is first)
-        t_last = next(t for t, d in diags if d is last)
+        inside = [(stamp, d) for t, stamp, d in diags if t <= t0 + wall + 0.6]
+        (t_first, first), (t_last, last) = inside[0], inside[-1]
         ticks = int(last["ticks"]) - int(first["ticks"])
         missed = int(last["missed_ticks"]) - int(first["missed_ticks"])
         late = int(last["late_ticks"]) - int(first["late_ticks"])
@@ -218,7 +217,7 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--seconds", type=float, default=12.0)
     ap.add_argument("--rate", type=float, default=1000.0)
-    ap.add_argument("--executor", choices=("single", "events"), default="single")
+    ap.add_argument("--executor", choices=("single", "multi"), default="single")
     ap.add_argument("--flood", type=float, default=0.0, metavar="HZ")
     ap.add_argument("--json", default=None)
     args = ap.parse_args()

@@ -128,20 +128,27 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
     if not np.isfinite(sigma) or sigma <= 0:
         sigma = max(float(np.nanstd(resid0)) * 1e-3, 1e-9)
 
-    # candidates: every mechanism alone on the calibrated model (cheap, one parameter), then
-    # the JOINT_REFITS best on the fit runs refitted jointly with the friction correction
-    fits = {}
+    # candidates: every mechanism alone (one parameter, cheap) on both the car-calibrated and
+    # the bench-fitted friction -- a car calibration may have absorbed part of the mechanism --
+    # then the JOINT_REFITS best on the fit runs refitted jointly with the friction correction,
+    # from the friction they did best on
+    fits, bases = {}, {}
     ids = list(candidates) if candidates else CANDIDATE_IDS
     t0 = time.perf_counter()
+    starts = [("calibrated", calibrated.model, cal_base)]
+    if cal_base is not bench_model:
+        starts.append(("bench", bench_model, bench_model))
     for cid in ids:
         say(f"fitting candidate {cid}")
-        fits[cid] = fit_candidate(calibrated.model, campaign, fit_mask, cid, energy_total, torque_scale,
-                                  fit_friction=False, noise_sigma_nm=sigma_guess)
+        for label, start_model, joint_base in starts:
+            fit = fit_candidate(start_model, campaign, fit_mask, cid, energy_total, torque_scale,
+                                fit_friction=False, noise_sigma_nm=sigma_guess)
+            if cid not in fits or fit.fit_rmse_nm < fits[cid].fit_rmse_nm:
+                fits[cid], bases[cid] = fit, joint_base
     for cid in sorted(fits, key=lambda k: fits[k].fit_rmse_nm)[:JOINT_REFITS]:
         say(f"refitting {cid} jointly with the friction correction")
-        joint = fit_candidate(cal_base, campaign, fit_mask, cid, energy_total, torque_scale,
+        joint = fit_candidate(bases[cid], campaign, fit_mask, cid, energy_total, torque_scale,
                               noise_sigma_nm=sigma_guess, start=fits[cid].parameters)
-        joint.joint = True
         if joint.fit_rmse_nm <= fits[cid].fit_rmse_nm:
             fits[cid] = joint
     fits = list(fits.values())

@@ -1,0 +1,93 @@
+"""`clutch-sim diagnose` speed and hit rate.
+
+Speed (issue 5 target: <= 60 s with a warm JIT cache): one campaign of 9 runs of ~9 s at
+200 Hz plus the 135-row bench table, through the real CLI (bag decoding included), timed
+per stage.
+Hit rate: campaigns from the virtual test car with every catalog mechanism, none, and both
+effects outside the catalog, magnitudes drawn log-uniformly over each effect's visible range,
+over --seeds seeds (default 2; each campaign takes ~15-30 s on this 2-core machine).
+
+    python bench/bench_diagnose.py [--seeds N] [--first-seed S] [--speed-only]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+os.environ.setdefault("NUMBA_CACHE_DIR", str(Path(__file__).resolve().parents[1] / ".numba_cache"))
+
+import numpy as np  # noqa: E402
+
+CASES = ["none", "actuator_lag", "actuator_hysteresis", "spring_preload", "friction_degradation",
+         "torque_offset", "transport_delay", "drag_torque", "torque_ripple", "pressure_temperature_cross"]
+
+
+def campaign(tmp: Path, seed: int, case: str, n_runs=9, duration=9.0):
+    from clutch_model.synth import EXTRA_EFFECTS, VISIBLE_RANGE, CampaignSpec, synthesize_campaign, write_campaign
+
+    rng = np.random.default_rng([seed, CASES.index(case)])
+    kw, mag = {}, None
+    if case != "none":
+        rr = VISIBLE_RANGE[case]
+        if rr is not None:
+            mag = float(np.exp(rng.uniform(np.log(rr[0]), np.log(rr[1]))))
+        key = "extra_effect" if case in EXTRA_EFFECTS else "mechanism"
+        kw = {key: case, "magnitude": mag}
+    spec = CampaignSpec(seed=seed, n_runs=n_runs, run_duration_s=duration, **kw)
+    write_campaign(synthesize_campaign(spec), tmp)
+    return spec, mag
+
+
+def diagnose(tmp: Path):
+    from clutch_sim.cli import main as cli
+
+    bags = sorted(str(p) for p in (tmp / "bags").iterdir())
+    t0 = time.perf_counter()
+    rc = cli(["diagnose", "--bench", str(tmp / "bench.csv"), "--bags", *bags, "--out", str(tmp / "diag")])
+    wall = time.perf_counter() - t0
+    assert rc == 0
+    return json.loads((tmp / "diag" / "report.json").read_text()), wall
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--seeds", type=int, default=2)
+    ap.add_argument("--first-seed", type=int, default=101)
+    ap.add_argument("--speed-only", action="store_true")
+    args = ap.parse_args()
+
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        campaign(tmp / "warm", 1, "none", n_runs=3, duration=4.0)
+        diagnose(tmp / "warm")   # JIT cache warm-up
+        campaign(tmp / "speed", args.first_seed, "actuator_lag")
+        rep, wall = diagnose(tmp / "speed")
+        print(f"speed: 9 runs x 9 s at 200 Hz + 135 bench rows: {wall:.1f} s wall (target <= 60 s)")
+        print("  stages [s]: " + ", ".join(f"{k} {v:.1f}" for k, v in rep["timings_s"].items()))
+    if args.speed_only:
+        return 0
+    hits, total = 0, 0
+    for seed in range(args.first_seed, args.first_seed + args.seeds):
+        for case in CASES:
+            with tempfile.TemporaryDirectory() as tmp:
+                spec, mag = campaign(Path(tmp), seed, case)
+                rep, wall = diagnose(Path(tmp))
+            ok = rep["cause"]["id"] == spec.expected_cause
+            hits += ok
+            total += 1
+            r = rep["rmse_nm"]
+            mag_s = f"{mag:.4g}" if mag is not None else "default"
+            print(f"seed {seed} {case:27s} magnitude {mag_s:<10s} -> "
+                  f"{rep['cause']['id']:22s} {'ok ' if ok else 'MISS'} held-out RMSE cal {r['calibrated']:.1f} "
+                  f"ext {r['extended']:.1f} N*m, noise {rep['noise_sigma_nm']:.1f}, {wall:.0f} s", flush=True)
+    print(f"hit rate: {hits}/{total}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
