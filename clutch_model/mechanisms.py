@@ -27,7 +27,13 @@ class Mechanism:
     bounds = {}
     physics = ""
 
+    state_keys = ()  # non-fitted entries carried in the model file (campaign state)
+
     def __post_init__(self):
+        unknown = set(self.values) - set(self.parameters) - set(self.state_keys)
+        if unknown:
+            raise ParamsError(f"mechanism {self.id}: unknown entry '{sorted(unknown)[0]}' "
+                              f"(parameters: {', '.join(self.parameters)})")
         for name in self.parameters:
             if name not in self.values:
                 raise ParamsError(f"mechanism {self.id}: missing parameter '{name}'")
@@ -40,10 +46,14 @@ class Mechanism:
             self.values[name] = v
 
     def copy(self):
-        return type(self)(dict(self.values))
+        return type(self)({k: (list(v) if isinstance(v, list) else v) for k, v in self.values.items()})
 
     def to_dict(self) -> dict:
-        return {"id": self.id, **{k: float(v) for k, v in self.values.items()}}
+        return {"id": self.id, **{k: float(v) if k in self.parameters else v for k, v in self.values.items()}}
+
+    @property
+    def parameter_values(self) -> dict:
+        return {k: self.values[k] for k in self.parameters}
 
     def apply_to_vector(self, p: np.ndarray) -> None:
         """Plant mechanisms write their parameters into the kernel vector."""
@@ -84,13 +94,40 @@ class SpringPreload(Mechanism):
 
 
 class FrictionDegradation(Mechanism):
+    """``energy_history`` (optional state, written by ``diagnose``): [[log_time_ns, E_j], ...],
+    the campaign's dissipated energy at known times (its runs' starts and ends). A replay whose
+    first bag starts at or after a recorded time starts from that energy, so later runs replayed
+    on their own continue the campaign instead of starting from a fresh lining."""
+
     id = "friction_degradation"
     parameters = ("energy_scale_j",)
+    state_keys = ("energy_history",)
     bounds = {"energy_scale_j": (1.0, 1e15)}
     physics = "lining glazing / ATF ageing: mu_f scaled by exp(-E/energy_scale)"
 
+    def __post_init__(self):
+        super().__post_init__()
+        hist = self.values.get("energy_history")
+        if hist is not None:
+            try:
+                rows = [[int(t), float(e)] for t, e in hist]
+            except (TypeError, ValueError):
+                raise ParamsError("mechanism friction_degradation: energy_history must be "
+                                  "[[log_time_ns, energy_j], ...]") from None
+            if any(not np.isfinite(e) or e < 0 for _, e in rows):
+                raise ParamsError("mechanism friction_degradation: energy_history energies must be >= 0")
+            self.values["energy_history"] = sorted(rows)
+
     def apply_to_vector(self, p):
         p[P.ENERGY_SCALE_J] = self.values["energy_scale_j"]
+
+    def energy_at(self, time_ns: int) -> float:
+        """Campaign energy known at or before ``time_ns`` (0 before the campaign)."""
+        energy = 0.0
+        for t, e in self.values.get("energy_history") or []:
+            if t <= time_ns:
+                energy = e
+        return energy
 
 
 class DragTorque(Mechanism):

@@ -117,6 +117,11 @@ class ClutchModel:
                 return m
         return None
 
+    def initial_energy_j(self, start_time_ns: int) -> float:
+        """Dissipated campaign energy when a replay starts at ``start_time_ns``."""
+        m = self.mechanism("friction_degradation")
+        return m.energy_at(start_time_ns) if m is not None else 0.0
+
     def copy(self) -> "ClutchModel":
         return ClutchModel(copy.deepcopy(self.data), [m.copy() for m in self.mechanisms], self.source)
 

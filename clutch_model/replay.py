@@ -61,9 +61,13 @@ def _rmse(pred, meas, mask=None):
     return float(np.sqrt(np.mean((pred[ok] - meas[ok]) ** 2)))
 
 
-def replay_runs(model: ClutchModel, runs, energy0_j: float = 0.0) -> ReplayResult:
-    """Simulate runs (a Campaign or a list of Run) through ``model``."""
+def replay_runs(model: ClutchModel, runs, energy0_j: float | None = None) -> ReplayResult:
+    """Simulate runs (a Campaign or a list of Run) through ``model``. The dissipated energy
+    starts at ``energy0_j``, by default what the model's campaign history knows at the first
+    run's start (0 for a fresh model)."""
     campaign = runs if isinstance(runs, Campaign) else Campaign(list(runs))
+    if energy0_j is None:
+        energy0_j = model.initial_energy_j(campaign.runs[0].start_time_ns)
     sim = simulate(model, campaign.t, campaign.force, campaign.slip, campaign.sump,
                    run_start=campaign.run_start, energy0_j=energy0_j)
     torque = predict_measured_torque(model, campaign.t, sim.torque_nm, campaign.run_start)

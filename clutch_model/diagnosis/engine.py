@@ -174,6 +174,8 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
         extended_fit = next(f for f in fits if f.id == cause)
         extended_model = extended_fit.model
         cause_params = dict(extended_fit.parameters)
+        if cause == "friction_degradation":
+            _record_energy_history(extended_model, campaign)
     rmse = {
         "nominal": _rmse(nominal_resid, eval_mask),
         "bench": _rmse(campaign.torque_measured - bench_rep.torque_sim, eval_mask),
@@ -191,6 +193,18 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
                      calibrated_model=calibrated.model, extended_model=extended_model, campaign=campaign,
                      calibrated_fit=calibrated, extended_fit=extended_fit, nominal_pred=nominal_rep.torque_sim,
                      bench_info=bench_info or {}, calibration_info=calibration_info, timings=timings)
+
+
+def _record_energy_history(model: ClutchModel, campaign: Campaign) -> None:
+    """Store the campaign's dissipated energy at each run's start and end in the model, so a
+    later replay of runs after this campaign continues from it (mechanisms.FrictionDegradation)."""
+    energy = replay_runs(model, campaign, energy0_j=0.0).sim.energy_j
+    history = []
+    for r, sl in campaign.slices():
+        e = energy[sl]
+        history.append([int(r.start_time_ns), float(e[0])])
+        history.append([int(r.start_time_ns + round(float(r.t[-1]) * 1e9)), float(e[-1])])
+    model.mechanism("friction_degradation").values["energy_history"] = history
 
 
 def _evidence(cause, reason, sigma, rmse, scores, r2, params) -> str:

@@ -1,0 +1,240 @@
+"""Calibration of the friction coefficients on car-test runs (measured torque) — regression
+counterpart of the thesis' Monte Carlo refinement (§5.3), beyond the thesis.
+
+scipy.optimize.least_squares (trust-region reflective, bounded) on the batch simulator:
+residuals are (predicted measured torque - measured torque) / sqrt(n), plus a ridge toward a
+prior (the bench fit) in relative units; the Jacobian is a forward difference computed as ONE
+batch-simulator call over the k+1 perturbed parameter sets. Only the coefficients the data can
+identify move (``sensitivity.identifiability_screen`` unless given). The result must keep
+mu_f >= 0 over P in [0, 6] MPa, theta in [0, 230] C, w in [0, 30] rad/s (§5.3 check,
+``box.friction_positive``); if the optimum violates it, the step from the start is shortened
+(bisection) until it holds.
+
+Uncertainty: cov = s^2 (J'J)^-1 at the optimum (J of the data residuals w.r.t. the moved
+coefficients, s^2 = SSR/(n - k)). It assumes white residuals; car-test residuals are
+correlated in time (model error), so read it as a lower bound.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import FitError
+from ..params import ClutchModel
+from . import box
+from .evaluate import CampaignInputs, as_campaign, param_rows, predict, rmse_of
+
+
+@dataclass
+class CalibrationResult:
+    model: ClutchModel
+    rmse_before: float
+    rmse_after: float
+    coefficients_moved: list
+    a_before: np.ndarray
+    a_after: np.ndarray
+    stderr: np.ndarray                 # (20,), nan for coefficients that did not move
+    covariance: np.ndarray             # (k, k) over coefficients_moved, coefficient units
+    residual_std: float
+    n_evaluations: int                 # parameter sets simulated (incl. the screen's)
+    n_iterations: int
+    positive: bool
+    backtracked: float                 # fraction of the step kept (1 = full optimum)
+    elapsed_s: float
+    message: str = ""
+    screen: object = None
+    notes: list = field(default_factory=list)
+
+    @property
+    def correlation(self) -> np.ndarray:
+        d = np.sqrt(np.clip(np.diag(self.covariance), 1e-300, None))
+        return self.covariance / np.outer(d, d)
+
+    def summary_lines(self) -> list:
+        lines = [f"calibrate: torque RMSE {self.rmse_before:.3f} -> {self.rmse_after:.3f} N*m "
+                 f"({self.n_evaluations} model evaluations, {self.n_iterations} iterations, {self.elapsed_s:.1f} s)",
+                 "moved: " + (", ".join(f"a{k}" for k in self.coefficients_moved) or "none")]
+        for k in self.coefficients_moved:
+            rel = abs(self.stderr[k] / self.a_after[k]) if self.a_after[k] else math.inf
+            lines.append(f"  a{k:<2d} {self.a_before[k]: .5e} -> {self.a_after[k]: .5e} +- {self.stderr[k]:.2e} "
+                         f"(rel {rel:.1%}; {box.BLOCK_OF[k]}: {box.MONOMIAL[k % 5]})")
+        lines.append(f"friction positive over P [0,6] MPa x theta [0,230] C x w [0,30] rad/s: {self.positive}"
+                     + (f" (step shortened to {self.backtracked:.3f} of the optimum)" if self.backtracked < 1 else ""))
+        lines += [f"note: {n}" for n in self.notes]
+        return lines
+
+    def to_json(self) -> dict:
+        return {"rmse_before": self.rmse_before, "rmse_after": self.rmse_after,
+                "coefficients_moved": [int(k) for k in self.coefficients_moved],
+                "a_before": [float(x) for x in self.a_before], "a_after": [float(x) for x in self.a_after],
+                "stderr": {f"a{k}": float(self.stderr[k]) for k in self.coefficients_moved},
+                "correlation": np.round(self.correlation, 4).tolist() if self.coefficients_moved else [],
+                "residual_std": self.residual_std, "n_evaluations": self.n_evaluations,
+                "n_iterations": self.n_iterations, "positive": self.positive, "backtracked": self.backtracked,
+                "elapsed_s": self.elapsed_s, "message": self.message, "notes": self.notes,
+                "screen_selected": list(self.screen.selected) if self.screen is not None else None}
+
+
+def coefficient_scale(a) -> np.ndarray:
+    """Relative scale of each coefficient (|a_k|, floored where a_k ~ 0 by the value that moves
+    its term by 1e-3 in mu over the car box)."""
+    a = np.asarray(a, float)
+    basis_max = np.tile([1.0, 6.0, 36.0, 230.0, 230.0 ** 2], 4)
+    return np.maximum(np.abs(a), 1e-3 / basis_max)
+
+
+def _positive_fraction(a_start, a_end, i, steps=30):
+    """Largest t in [0, 1] (bisection) with a_start + t (a_end - a_start) friction-positive."""
+    if box.friction_positive(a_end, i):
+        return 1.0
+    lo, hi = 0.0, 1.0
+    for _ in range(steps):
+        mid = 0.5 * (lo + hi)
+        if box.friction_positive(a_start + mid * (a_end - a_start), i):
+            lo = mid
+        else:
+            hi = mid
+    return lo
+
+
+def calibrate_friction(model: ClutchModel, runs_or_campaign, coefficients="auto", prior: ClutchModel | None = None,
+                       regularization: float = 0.05, max_rel_change: float = 1.0, fd_step: float = 1e-4,
+                       max_iterations: int = 40, rows=None, screen_kw: dict | None = None,
+                       progress=None) -> CalibrationResult:
+    """Refine the friction coefficients against the measured torque (see module doc).
+
+    coefficients: "auto" (identifiability screen), or indices 0..19.
+    prior: model whose coefficients the ridge pulls toward (default: ``model``, i.e. the bench fit).
+    regularization: ridge weight; a relative change x of a coefficient costs
+        (regularization * rmse_before * x)^2 in mean-square torque.
+    rows: optional boolean mask over the campaign rows to fit on (e.g. hold runs out).
+    """
+    from scipy.optimize import least_squares
+
+    t0 = time.perf_counter()
+    say = progress or (lambda msg: None)
+    campaign = as_campaign(runs_or_campaign)
+    inputs = CampaignInputs.from_campaign(campaign, model, rows=rows)
+    base = model.vector()
+    i_exp = model.friction_exponent
+    a_start = model.friction_coefficients.copy()
+    a_prior = (prior.friction_coefficients if prior is not None else a_start).copy()
+    n_eval = 0
+    screen = None
+    notes = []
+    if isinstance(coefficients, str) and coefficients == "auto":
+        from .sensitivity import identifiability_screen
+
+        say("identifiability screen")
+        screen = identifiability_screen(model, campaign, inputs=inputs, **(screen_kw or {}))
+        n_eval += screen.n_simulations
+        moved = list(screen.selected)
+    else:
+        moved = sorted({int(k) for k in coefficients})
+        if any(k < 0 or k > 19 for k in moved):
+            raise FitError("coefficient indices must be within 0..19")
+    rmse0 = float(rmse_of(base, a_start[None, :], inputs)[0])
+    n_eval += 1
+    if not moved:
+        notes.append("no coefficient is identifiable from these runs; model unchanged")
+        return CalibrationResult(model=model.copy(), rmse_before=rmse0, rmse_after=rmse0, coefficients_moved=[],
+                                 a_before=a_start, a_after=a_start.copy(), stderr=np.full(20, np.nan),
+                                 covariance=np.zeros((0, 0)), residual_std=rmse0, n_evaluations=n_eval,
+                                 n_iterations=0, positive=box.friction_positive(a_start, i_exp), backtracked=1.0,
+                                 elapsed_s=time.perf_counter() - t0, screen=screen, notes=notes)
+    idx = np.array(moved)
+    scale = coefficient_scale(a_start)[idx]
+    meas = inputs.torque_measured[inputs.mask]
+    n = meas.size
+    sqrt_n = math.sqrt(n)
+    lam = float(regularization) * rmse0
+    prior_x = (a_prior[idx] - a_start[idx]) / scale
+
+    def coeffs(x):
+        a = a_start.copy()
+        a[idx] = a_start[idx] + scale * x
+        return a
+
+    def residual_from(pred_row, x):
+        r = (pred_row[inputs.mask] - meas) / sqrt_n
+        if lam > 0:
+            r = np.concatenate([r, lam * (x - prior_x)])
+        return r
+
+    cache = {}
+    counter = {"n": 0, "it": 0}
+
+    def fun(x):
+        key = x.tobytes()
+        if key not in cache:
+            cache.clear()
+            cache[key] = predict(param_rows(base, coeffs(x)[None, :]), inputs)[0]
+            counter["n"] += 1
+        return residual_from(cache[key], x)
+
+    def jac(x):
+        h = fd_step
+        A = [coeffs(x)]
+        for j in range(idx.size):
+            xp = x.copy()
+            xp[j] += h
+            A.append(coeffs(xp))
+        pred = predict(param_rows(base, np.array(A)), inputs)      # ONE batch call, k+1 sets
+        counter["n"] += len(A)
+        counter["it"] += 1
+        say(f"iteration {counter['it']}: RMSE {math.sqrt(np.mean((pred[0][inputs.mask] - meas) ** 2)):.3f}")
+        d = (pred[1:, inputs.mask] - pred[0][inputs.mask][None, :]) / (h * sqrt_n)
+        J = d.T
+        if lam > 0:
+            J = np.vstack([J, lam * np.eye(idx.size)])
+        return J
+
+    x0 = np.zeros(idx.size)
+    lb = np.full(idx.size, -max_rel_change)
+    ub = np.full(idx.size, max_rel_change)
+    res = least_squares(fun, x0, jac=jac, bounds=(lb, ub), method="trf", x_scale=1.0,
+                        max_nfev=max_iterations, xtol=1e-10, ftol=1e-10, gtol=1e-10)
+    n_eval += counter["n"]
+    a_opt = coeffs(res.x)
+    start_positive = box.friction_positive(a_start, i_exp)
+    frac = 1.0
+    if start_positive:
+        frac = _positive_fraction(a_start, a_opt, i_exp)
+        if frac < 1.0:
+            notes.append("the unconstrained optimum makes mu_f negative somewhere in the car box; "
+                         f"kept {frac:.3f} of the step")
+    else:
+        notes.append("the starting model's friction is already negative somewhere in the car box")
+    a_after = a_start + frac * (a_opt - a_start)
+    positive = box.friction_positive(a_after, i_exp)
+    # final RMSE and covariance at the result (one more batch: base + k perturbations)
+    x_after = (a_after[idx] - a_start[idx]) / scale
+    A = [a_after]
+    for j in range(idx.size):
+        xp = x_after.copy()
+        xp[j] += fd_step
+        A.append(coeffs(xp))
+    pred = predict(param_rows(base, np.array(A)), inputs)
+    n_eval += len(A)
+    r = pred[0][inputs.mask] - meas
+    rmse1 = float(np.sqrt(np.mean(r ** 2)))
+    Ja = ((pred[1:, inputs.mask] - pred[0][inputs.mask][None, :]) / (fd_step * scale[:, None])).T   # dT/da
+    dof = max(n - idx.size, 1)
+    s2 = float(r @ r) / dof
+    JtJ = Ja.T @ Ja
+    try:
+        cov = s2 * np.linalg.inv(JtJ)
+    except np.linalg.LinAlgError:
+        cov = s2 * np.linalg.pinv(JtJ)
+        notes.append("J'J singular at the optimum: covariance from the pseudo-inverse")
+    stderr = np.full(20, np.nan)
+    stderr[idx] = np.sqrt(np.clip(np.diag(cov), 0, None))
+    return CalibrationResult(model=model.with_friction(a=a_after), rmse_before=rmse0, rmse_after=rmse1,
+                             coefficients_moved=[int(k) for k in idx], a_before=a_start, a_after=a_after,
+                             stderr=stderr, covariance=cov, residual_std=math.sqrt(s2), n_evaluations=n_eval,
+                             n_iterations=counter["it"], positive=bool(positive), backtracked=frac,
+                             elapsed_s=time.perf_counter() - t0, message=str(res.message), screen=screen,
+                             notes=notes)

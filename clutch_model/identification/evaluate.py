@@ -1,0 +1,107 @@
+"""Batch evaluation of friction-coefficient sets on a car-test campaign: the one place that
+turns parameter rows into predicted *measured* torque (measurement mechanisms applied) and
+RMSE. Everything here is a pure function of its arguments (Dask chunks call ``chunk_rmse``).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .. import params as P
+from ..errors import DataError
+from ..mechanisms import apply_measurement
+from ..params import ClutchModel
+from ..runs import Campaign
+from ..simulate import simulate_batch
+
+A_SLICE = slice(P.FRICTION_A, P.FRICTION_A + P.N_FRICTION_COEFFS)
+
+
+def as_campaign(runs_or_campaign) -> Campaign:
+    if isinstance(runs_or_campaign, Campaign):
+        return runs_or_campaign
+    runs = list(runs_or_campaign)
+    if not runs:
+        raise DataError("no runs")
+    return Campaign(runs)
+
+
+@dataclass
+class CampaignInputs:
+    """The simulator inputs of a campaign plus what RMSE needs (picklable, no model)."""
+
+    t: np.ndarray
+    force: np.ndarray
+    slip: np.ndarray
+    sump: np.ndarray
+    run_start: np.ndarray
+    torque_measured: np.ndarray
+    mask: np.ndarray                 # rows with a finite measured torque that count
+    measurement: list                # measurement mechanisms (torque_offset, transport_delay)
+    names: list
+
+    @classmethod
+    def from_campaign(cls, campaign, model: ClutchModel | None = None, rows=None) -> "CampaignInputs":
+        campaign = as_campaign(campaign)
+        meas = np.asarray(campaign.torque_measured, float)
+        mask = np.isfinite(meas)
+        if rows is not None:
+            mask &= np.asarray(rows, bool)
+        if not mask.any():
+            raise DataError("no measured torque in the runs (/clutch/measured_torque)")
+        mech = [m.copy() for m in (model.mechanisms if model is not None else []) if m.kind == "measurement"]
+        return cls(t=np.ascontiguousarray(campaign.t, float), force=np.ascontiguousarray(campaign.force, float),
+                   slip=np.ascontiguousarray(campaign.slip, float), sump=np.ascontiguousarray(campaign.sump, float),
+                   run_start=np.ascontiguousarray(campaign.run_start, bool), torque_measured=meas, mask=mask,
+                   measurement=mech, names=list(campaign.names))
+
+    @property
+    def n_rows(self) -> int:
+        return int(self.t.size)
+
+    @property
+    def simulated_seconds(self) -> float:
+        """Total simulated time of one parameter set over the campaign."""
+        starts = np.flatnonzero(self.run_start)
+        ends = np.append(starts[1:], self.t.size) - 1
+        return float(np.sum(self.t[ends] - self.t[starts]))
+
+
+def predict(pmat, inputs: CampaignInputs) -> np.ndarray:
+    """Predicted measured torque (S, N) for parameter rows ``pmat`` (S, 48)."""
+    res = simulate_batch(np.atleast_2d(pmat), inputs.t, inputs.force, inputs.slip, inputs.sump,
+                         run_start=inputs.run_start)
+    tq = res.torque_nm
+    if inputs.measurement:
+        tq = apply_measurement(inputs.measurement, inputs.t, tq, inputs.run_start)
+    return tq
+
+
+def rmse_rows(pred: np.ndarray, inputs: CampaignInputs) -> np.ndarray:
+    d = pred[:, inputs.mask] - inputs.torque_measured[inputs.mask][None, :]
+    return np.sqrt(np.mean(d * d, axis=1))
+
+
+def param_rows(base_vector, A) -> np.ndarray:
+    """Kernel parameter rows: the base vector with friction coefficients a0..a19 from A."""
+    A = np.atleast_2d(np.asarray(A, float))
+    pm = np.repeat(np.asarray(base_vector, float)[None, :], A.shape[0], axis=0)
+    pm[:, A_SLICE] = A
+    return np.ascontiguousarray(pm)
+
+
+def rmse_of(base_vector, A, inputs: CampaignInputs) -> np.ndarray:
+    return rmse_rows(predict(param_rows(base_vector, A), inputs), inputs)
+
+
+def chunk_rmse(base_vector, A_chunk, inputs: CampaignInputs, numba_threads: int | None = None) -> np.ndarray:
+    """RMSE of each coefficient row of one chunk (pure: same arguments, same floats — the batch
+    kernel computes each row independently, whatever the thread count)."""
+    if numba_threads:
+        import numba
+
+        numba.set_num_threads(max(1, min(int(numba_threads), numba.config.NUMBA_NUM_THREADS)))
+    if len(A_chunk) == 0:
+        return np.empty(0)
+    return rmse_of(base_vector, A_chunk, inputs)
