@@ -216,7 +216,7 @@ def read_bags(paths, topics: TopicNames = TopicNames(), progress: bool = False) 
     it = paths
     if progress and len(paths) > 1:
         from tqdm import tqdm
-        it = tqdm(paths, desc="reading bags", unit="bag", leave=False)
+        it = tqdm(paths, desc="reading bags", unit="bag", leave=False, disable=None)  # no bar off a TTY
     runs = [read_bag(p, topics) for p in it]
     names = [r.name for r in runs]
     dup = {n for n in names if names.count(n) > 1}
