@@ -38,6 +38,7 @@ N_DER = 12
  D_FE0, D_HMAX) = range(12)
 
 MAX_REL_DH = 0.1
+MAX_STEP_S = 0.0051       # longer steps are split (inputs held): 200 Hz rows are one step
 MAX_SUBSTEPS = 400
 INV_SQRT_2PI = 1.0 / math.sqrt(2.0 * math.pi)
 SQRT2 = math.sqrt(2.0)
@@ -287,9 +288,20 @@ def outputs(state, slip, sump_temperature, p, d, out):
 @njit(cache=True)
 def advance(state, slip, sump_temperature, dt, p, d, scratch):
     """Integrate the state over dt with the current inputs held (the pack-force target is
-    the one set by the last pack_force_target() call)."""
+    the one set by the last pack_force_target() call). Steps longer than MAX_STEP_S are
+    split, so slow input rates (10 Hz) keep the accuracy of fast ones."""
     if not (dt > 0.0):
         return
+    n = int(math.ceil(dt / MAX_STEP_S))
+    if n < 1:
+        n = 1
+    h = dt / n
+    for _ in range(n):
+        _advance_once(state, slip, sump_temperature, h, p, d, scratch)
+
+
+@njit(cache=True)
+def _advance_once(state, slip, sump_temperature, dt, p, d, scratch):
     theta0 = state[S_THETA]
     mu = viscosity(theta0, p)
     tau = p[P.LAG_TAU_S]
@@ -316,7 +328,7 @@ def advance(state, slip, sump_temperature, dt, p, d, scratch):
     frac = -math.expm1(-k * dt / p[P.PLATE_HEAT_CAPACITY])
     state[S_THETA] = theta0 + (q / k - (theta0 - sump)) * frac
     state[S_ENERGY] += heat * dt
-    state[S_POWER] = p_start  # restored: the next outputs() call sets it for the new sample
+    state[S_POWER] = p_end  # heat power at the end of the step (inputs held)
 
 
 @njit(cache=True)
