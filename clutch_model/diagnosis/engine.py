@@ -124,9 +124,9 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
     timings["friction correction"] = time.perf_counter() - t0
 
     resid0 = calibrated.residual
-    sigma = F.noise_sigma(resid0, campaign.run_start)
-    if not np.isfinite(sigma) or sigma <= 0:
-        sigma = max(float(np.nanstd(resid0)) * 1e-3, 1e-9)
+    sigma_rows = F.noise_profile(resid0, campaign.t, campaign.run_start)
+    sigma_rows = np.where(np.isfinite(sigma_rows) & (sigma_rows > 0), sigma_rows,
+                          max(float(np.nanstd(resid0)) * 1e-3, 1e-9))
 
     # candidates: every mechanism alone (one parameter, cheap) on both the car-calibrated and
     # the bench-fitted friction -- a car calibration may have absorbed part of the mechanism --
@@ -158,8 +158,9 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
     calibrated.held_out_rmse_nm = _rmse(resid0, eval_mask)
 
     labels = blocks(campaign.t, eval_mask, campaign.run_index)
-    mse0, excess, scores = score_candidates(resid0, {f.id: f.residual for f in fits}, sigma, labels)
-    cause, best, reason = decide(mse0, excess, sigma, scores)
+    mse0, excess, noise_ms, scores = score_candidates(resid0, {f.id: f.residual for f in fits}, sigma_rows, labels)
+    sigma = math.sqrt(noise_ms)
+    cause, best, reason = decide(mse0, excess, noise_ms, scores)
     fits.sort(key=lambda f: f.held_out_rmse_nm)
 
     # features of the calibrated residual (evidence)

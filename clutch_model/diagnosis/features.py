@@ -29,6 +29,26 @@ def noise_sigma(residual: np.ndarray, run_start: np.ndarray) -> float:
     return float(1.4826 * mad / math.sqrt(2.0))
 
 
+def noise_profile(residual: np.ndarray, t: np.ndarray, run_start: np.ndarray, block_s: float = 1.0):
+    """Per-row noise level: the MAD estimate of noise_sigma() over consecutive block_s windows
+    of each run, so noise that differs from run to run (or grows with the torque level) is
+    not mistaken for structure. Falls back to the campaign-wide estimate for short blocks."""
+    r = np.asarray(residual, float)
+    out = np.full(r.size, noise_sigma(r, run_start))
+    starts = np.flatnonzero(run_start)
+    ends = np.append(starts[1:], r.size)
+    for a, b in zip(starts, ends):
+        block = np.floor((t[a:b] - t[a]) / block_s).astype(np.int64)
+        for k in np.unique(block):
+            rows = a + np.flatnonzero(block == k)
+            d = np.diff(r[rows])
+            d = d[np.isfinite(d)]
+            if d.size >= 20:
+                mad = np.median(np.abs(d - np.median(d)))
+                out[rows] = 1.4826 * mad / math.sqrt(2.0)
+    return out
+
+
 def _per_run_gradient(y, t, run_start):
     out = np.zeros_like(y)
     starts = np.flatnonzero(run_start)

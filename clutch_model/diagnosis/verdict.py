@@ -71,11 +71,13 @@ def block_t(d, labels):
     return float(means.mean() / (sd / math.sqrt(means.size)))
 
 
-def score_candidates(base_resid, cand_resids: dict, sigma, labels):
+def score_candidates(base_resid, cand_resids: dict, sigma_rows, labels):
+    """sigma_rows: the noise level per row (features.noise_profile)."""
     ok = labels >= 0
     ok &= np.isfinite(base_resid)
     mse0 = float(np.mean(base_resid[ok] ** 2))
-    excess = mse0 - sigma ** 2
+    noise_ms = float(np.mean(sigma_rows[ok] ** 2))
+    excess = mse0 - noise_ms
     scores = []
     for cid, r in cand_resids.items():
         okc = ok & np.isfinite(r)
@@ -84,17 +86,18 @@ def score_candidates(base_resid, cand_resids: dict, sigma, labels):
         t = block_t(d, np.where(okc, labels, -1))
         c = np.where(okc, base_resid - np.nan_to_num(r), 0.0)   # candidate's correction
         cc = float(np.dot(c, c))
-        z = float(np.dot(np.where(okc, base_resid, 0.0), c) / (sigma * math.sqrt(cc))) if cc > 0 else 0.0
+        cs = float(np.dot(c * c, np.where(okc, sigma_rows, 0.0) ** 2))
+        z = float(np.dot(np.where(okc, base_resid, 0.0), c) / math.sqrt(cs)) if cs > 0 else 0.0
         gain = mse0 - mse
         explained = gain / excess if excess > 0 else 0.0
         scores.append(CandidateScore(cid, math.sqrt(mse), gain, explained, t, z,
                                      significant=bool(z > Z_MIN and t > T_MIN and gain > 0)))
-    return mse0, excess, sorted(scores, key=lambda s: s.rmse)
+    return mse0, excess, noise_ms, sorted(scores, key=lambda s: s.rmse)
 
 
-def decide(mse0, excess, sigma, scores):
+def decide(mse0, excess, noise_ms, scores):
     """-> (cause id, winning score or None, reason)."""
-    rel = excess / sigma ** 2 if sigma > 0 else math.inf
+    rel = excess / noise_ms if noise_ms > 0 else math.inf
     winners = [s for s in scores if s.significant and s.explained >= EXPLAIN_MIN]
     if rel < STRUCTURE_MIN:
         return "none", None, (f"held-out mean-square error is only {100 * rel:.1f} % above the noise floor "
