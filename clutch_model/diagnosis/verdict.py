@@ -3,8 +3,9 @@
 Inputs are held-out residuals (measured - predicted) of the calibrated baseline and of each
 refitted candidate, and the noise level sigma estimated from the data. Rules:
 
-1. structure: the baseline's held-out mean-square error must exceed sigma^2 by more than
-   STRUCTURE_MIN (relative), else the verdict is `none`;
+1. structure: the baseline's held-out mean-square error must exceed the noise floor by more
+   than STRUCTURE_MIN (relative) for `unexplained`, and by NAMED_MIN for a named cause; below
+   that the verdict is `none`;
 2. a candidate wins if its held-out gain is significant against the noise and it removes at
    least EXPLAIN_MIN of the excess mean-square error above the noise floor. Significance: the
    candidate's correction c = (its prediction - the baseline's) was fitted on other runs, so
@@ -22,7 +23,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-STRUCTURE_MIN = 0.10   # baseline MSE must exceed sigma^2 by 10 %
+STRUCTURE_MIN = 0.10   # unexplained: baseline MSE must exceed the noise floor by 10 %
+NAMED_MIN = 0.03       # a named cause: by 3 % (and the cause must explain half of it)
 EXPLAIN_MIN = 0.5      # a cause must remove half of the excess MSE
 Z_MIN = 5.0            # matched-filter z of the held-out gain
 T_MIN = 1.0            # block t statistic of the held-out gain (guard)
@@ -99,12 +101,12 @@ def decide(mse0, excess, noise_ms, scores):
     """-> (cause id, winning score or None, reason)."""
     rel = excess / noise_ms if noise_ms > 0 else math.inf
     winners = [s for s in scores if s.significant and s.explained >= EXPLAIN_MIN]
-    if rel < STRUCTURE_MIN:
-        return "none", None, (f"held-out mean-square error is only {100 * rel:.1f} % above the noise floor "
-                              f"(threshold {100 * STRUCTURE_MIN:.0f} %)")
-    if winners:
+    if winners and rel >= NAMED_MIN:
         best = winners[0]
         return best.id, best, (f"{best.id} removes {100 * best.explained:.0f} % of the excess error "
                                f"(z = {best.z_stat:.1f}, block t = {best.t_stat:.1f})")
+    if rel < STRUCTURE_MIN:
+        return "none", None, (f"held-out mean-square error is only {100 * rel:.1f} % above the noise floor "
+                              f"(threshold {100 * STRUCTURE_MIN:.0f} %) and no candidate removes most of it")
     return "unexplained", None, (f"held-out mean-square error is {100 * rel:.0f} % above the noise floor and no "
                                  f"candidate removes {100 * EXPLAIN_MIN:.0f} % of it significantly")
