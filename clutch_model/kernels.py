@@ -332,6 +332,18 @@ def _advance_once(state, slip, sump_temperature, dt, p, d, scratch):
 
 
 @njit(cache=True)
+def _row(k, state, p, d, t, force, slip, sump, run_start, scratch, out):
+    """Row k of the replay grid: restart or advance from row k-1, take row k's force sample,
+    write the record of row k into ``out`` and return its torque."""
+    if k == 0 or run_start[k]:
+        init_state(state, force[k], sump[k], p)
+    else:
+        advance(state, slip[k - 1], sump[k - 1], t[k] - t[k - 1], p, d, scratch)
+    pack_force_target(state, force[k], p)
+    return outputs(state, slip[k], sump[k], p, d, out)
+
+
+@njit(cache=True)
 def run_trajectory(p, t, force, slip, sump, run_start, energy0):
     """Replay timing of CONTRACT.md: row k's outputs come from the state at t_k (integrated
     from t_{k-1} with row k-1's inputs held) and row k's inputs. A run_start row restarts
@@ -343,12 +355,7 @@ def run_trajectory(p, t, force, slip, sump, run_start, energy0):
     scratch = np.zeros(N_OUT)
     state[S_ENERGY] = energy0
     for k in range(n):
-        if k == 0 or run_start[k]:
-            init_state(state, force[k], sump[k], p)
-        else:
-            advance(state, slip[k - 1], sump[k - 1], t[k] - t[k - 1], p, d, scratch)
-        pack_force_target(state, force[k], p)
-        outputs(state, slip[k], sump[k], p, d, out[k])
+        _row(k, state, p, d, t, force, slip, sump, run_start, scratch, out[k])
     return out
 
 
@@ -367,12 +374,7 @@ def run_batch(pmat, t, force, slip, sump, run_start, energy0):
         out = np.zeros(N_OUT)
         state[S_ENERGY] = energy0
         for k in range(n):
-            if k == 0 or run_start[k]:
-                init_state(state, force[k], sump[k], p)
-            else:
-                advance(state, slip[k - 1], sump[k - 1], t[k] - t[k - 1], p, d, scratch)
-            pack_force_target(state, force[k], p)
-            torque[j, k] = outputs(state, slip[k], sump[k], p, d, out)
+            torque[j, k] = _row(k, state, p, d, t, force, slip, sump, run_start, scratch, out)
             theta[j, k] = out[O_THETA]
     return torque, theta
 
