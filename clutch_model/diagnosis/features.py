@@ -135,26 +135,42 @@ def _time_in_run(t, run_start):
 PER_RUN_FEATURES = ("slip angle (once per rev)",)
 
 
+def _slow_per_run_basis(time_in_run):
+    return np.column_stack([np.ones_like(time_in_run), time_in_run, time_in_run ** 2])
+
+
 def explained_variance(residual, features: dict, run_index) -> dict:
     """Share of the residual's variance (about zero) that a least-squares fit on each feature
-    block explains, over the whole campaign (evidence, not a test). Phase-like features
-    (slip angle) get their coefficients per run: their phase is arbitrary from run to run."""
+    block explains, over the whole campaign (evidence, not a test). Phase-like features (slip
+    angle) are fitted per run, since their phase is arbitrary from run to run, and are credited
+    only with what they add to a slow per-run trend (1, t, t^2): at low slip one revolution
+    spans a whole run and would otherwise pass for any slow drift."""
     out = {}
     ok = np.isfinite(residual)
     r = residual[ok]
     denom = float(np.dot(r, r))
+    if denom <= 0:
+        return {name: 0.0 for name in features}
     runs = run_index[ok]
+    slow = _slow_per_run_basis(features["time in run"][ok, 0]) if "time in run" in features else None
+
+    def per_run_sse(A):
+        sse = 0.0
+        for g in np.unique(runs):
+            sel = runs == g
+            coef, *_ = np.linalg.lstsq(A[sel], r[sel], rcond=None)
+            sse += float(np.sum((r[sel] - A[sel] @ coef) ** 2))
+        return sse
+
     for name, X in features.items():
         A = X[ok]
+        if name in PER_RUN_FEATURES and slow is not None:
+            out[name] = max(0.0, (per_run_sse(slow) - per_run_sse(np.column_stack([slow, A]))) / denom)
+            continue
         if name != "constant offset":
             A = np.column_stack([A, np.ones(A.shape[0])])
-        pred = np.zeros_like(r)
-        groups = np.unique(runs) if name in PER_RUN_FEATURES else [None]
-        for g in groups:
-            sel = slice(None) if g is None else (runs == g)
-            coef, *_ = np.linalg.lstsq(A[sel], r[sel], rcond=None)
-            pred[sel] = A[sel] @ coef
-        out[name] = max(0.0, 1.0 - float(np.sum((r - pred) ** 2)) / denom) if denom > 0 else 0.0
+        coef, *_ = np.linalg.lstsq(A, r, rcond=None)
+        out[name] = max(0.0, 1.0 - float(np.sum((r - A @ coef) ** 2)) / denom)
     return out
 
 
