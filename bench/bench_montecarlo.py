@@ -10,7 +10,7 @@
    evaluations: held-out RMSE, coefficient errors against the known truth, and the parameter
    uncertainty each implies (LS: covariance s^2 (J'J)^-1; MC: spread of the better samples).
 
-Usage: python bench/bench_montecarlo.py [--samples 1024] [--no-dask] [--json OUT.json]
+Usage: python bench/bench_montecarlo.py [--samples 2048] [--no-dask] [--json OUT.json]
 """
 from __future__ import annotations
 
@@ -149,7 +149,7 @@ def compare(model, truth):
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--samples", type=int, default=1024, help="Monte Carlo samples of the throughput run")
+    ap.add_argument("--samples", type=int, default=2048, help="Monte Carlo samples of the throughput run")
     ap.add_argument("--no-dask", action="store_true")
     ap.add_argument("--json", default=None, metavar="PATH")
     args = ap.parse_args()

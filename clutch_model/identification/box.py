@@ -67,7 +67,7 @@ def _quad_1d_candidates(b, c, lo, hi):
     """Candidate points {lo, hi, clip(vertex)} of b x + c x^2 on [lo, hi] (arrays (..., 3))."""
     b = np.asarray(b, float)
     c = np.asarray(c, float)
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         v = np.where(c != 0.0, -b / (2.0 * c), lo)
     v = np.clip(np.nan_to_num(v, nan=lo, posinf=hi, neginf=lo), lo, hi)
     return np.stack([np.full_like(v, lo), np.full_like(v, hi), v], axis=-1)

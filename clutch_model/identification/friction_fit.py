@@ -339,7 +339,6 @@ def _covariance(problem: _Problem, x, i_fixed, active_grads, dof_extra=0):
 def _active_gradients(problem: _Problem, reports, x):
     """Gradients (scaled coordinates) of the active constraints' extreme values."""
     grads = []
-    a = problem.a_of(x)
     nx = x.size
     for rep in reports:
         if not rep.active:
@@ -359,7 +358,6 @@ def _active_gradients(problem: _Problem, reports, x):
         g = np.zeros(nx)
         g[-1] = 1.0
         grads.append(g)
-    del a
     return grads
 
 
@@ -506,7 +504,7 @@ def fit_friction(bench, base_model: ClutchModel | None = None, mu_offset: float 
         af = fprob.a_of(resf.x)
         rf = fprob.residual(resf.x, i_base)
         ssr_fixed, ssr_free = float(rf @ rf), rmse2 ** 2 * prob.m
-        dof = max(prob.m - free.__len__() - 1, 1)
+        dof = max(prob.m - len(free) - 1, 1)
         F = (ssr_fixed - ssr_free) / max(ssr_free / dof, 1e-300)
         fixed_ok = box.constraints_satisfied(af, i_base, mu_offset, tol=1e-7)
         if fixed_ok and F < f_dist.ppf(0.95, 1, dof):

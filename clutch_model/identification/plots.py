@@ -125,14 +125,19 @@ def identifiability_figure(screen, outdir) -> Path:
     x = np.arange(20)
     col = ["tab:green" if k in screen.selected else ("tab:orange" if k in screen.candidates else "0.6")
            for k in x]
-    ax.bar(x, np.maximum(screen.effect_nm, 1e-6), color=col)
+    floor = max(screen.threshold_nm, 1e-9) * 1e-3
+    ax.bar(x, np.maximum(screen.effect_nm, floor), color=col)
     ax.set_yscale("log")
+    ax.set_ylim(floor, max(float(screen.effect_nm.max()), screen.threshold_nm) * 3)
+    for k in x:
+        if screen.effect_nm[k] <= 0:
+            ax.text(k, floor * 1.5, "0", ha="center", va="bottom", fontsize=7, color="0.3")
     ax.axhline(screen.threshold_nm, color="k", ls=":", lw=0.8, label=f"threshold {screen.threshold_nm:.3g} N m")
     ax.set_xticks(x)
     ax.set_xticklabels([f"a{k}" for k in x], fontsize=7)
     ax.set_ylabel("Morris mu* [N m RMS]")
-    ax.set_title("Which friction coefficients the car data identifies (green: selected, orange: collinear)",
-                 fontsize=9)
+    ax.set_title("Which friction coefficients the car data identifies (green: selected, orange: collinear "
+                 "with the selected, 0: no effect at all)", fontsize=9)
     ax.legend(fontsize=8)
     fig.tight_layout()
     p = Path(outdir) / "identifiability.png"

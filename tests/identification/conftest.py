@@ -1,0 +1,45 @@
+"""Shared synthetic data with known truth for the identification tests."""
+import numpy as np
+import pytest
+
+from clutch_model import load_model
+from clutch_model.identification import testdata as td
+
+NOISE_NM = 15.0
+# friction perturbation of the "true" car clutch against RC-1 (the bench fit)
+TRUTH_REL = {0: -0.05, 1: 0.10, 3: 0.12, 15: 0.25}
+
+
+@pytest.fixture(scope="session")
+def rc1():
+    return load_model()
+
+
+@pytest.fixture(scope="session")
+def truth(rc1):
+    return td.perturbed_friction(rc1, TRUTH_REL)
+
+
+@pytest.fixture(scope="session")
+def car_runs(truth):
+    """8 runs x 9 s x 200 Hz from the perturbed truth + 15 N*m noise: 6 to fit, 2 held out."""
+    runs = td.synthetic_runs(truth, n_runs=8, duration_s=9.0, rate_hz=200.0, noise_nm=NOISE_NM, seed=11)
+    return runs[:6], runs[6:]
+
+
+@pytest.fixture(scope="session")
+def bench_rc1(rc1):
+    return td.synthetic_bench(rc1, noise=0.002, seed=3)
+
+
+def grid_friction_min(a, i, p=(0, 6), th=(0, 230), w=(0, 30)):
+    """Independent dense-grid evaluation of the raw Stribeck law (no code shared with box)."""
+    a = np.asarray(a, float)
+    P, T, W = np.meshgrid(np.linspace(*p, 31), np.linspace(*th, 47),
+                          np.concatenate([np.linspace(*w, 61), np.geomspace(1e-4, w[1], 60)]), indexing="ij")
+
+    def poly(k):
+        return a[k] + a[k + 1] * P + a[k + 2] * P ** 2 + a[k + 3] * T + a[k + 4] * T ** 2
+
+    ws = np.maximum(poly(10), 1e-6)
+    return float((poly(0) + (poly(5) - poly(0)) * np.exp(-(W / ws) ** i) + poly(15) * W).min())

@@ -1,0 +1,88 @@
+import json
+
+import numpy as np
+import pytest
+
+from clutch_model.errors import FitError
+from clutch_model.identification import box, friction_fit as ff, testdata as td
+from clutch_model.kernels import friction_grid
+from clutch_model.params import load_model
+
+
+def _grid_extrema(a):
+    P, T = np.meshgrid(np.linspace(0, 20, 201), np.linspace(0, 230, 231), indexing="ij")
+    out = {}
+    for name, k in (("mu_C", 0), ("mu_S", 5), ("omega_S", 10), ("k_V", 15)):
+        v = a[k] + a[k + 1] * P + a[k + 2] * P ** 2 + a[k + 3] * T + a[k + 4] * T ** 2
+        out[name] = (v.min(), v.max())
+    return out
+
+
+def test_stribeck_matches_kernel_and_jacobian(rc1, bench_rc1):
+    a, i = rc1.friction_coefficients, rc1.friction_exponent
+    b = bench_rc1
+    mu, J = ff.stribeck(a, i, b.slip_speed_rad_s, b.pressure_mpa, b.plate_temperature_c, jac=True)
+    assert np.allclose(mu, friction_grid(rc1.vector(), b.slip_speed_rad_s, b.pressure_mpa, b.plate_temperature_c),
+                       atol=1e-14)
+    for k in (0, 3, 7, 11, 13, 16, 20):
+        h = 1e-7 * (abs(a[k]) if k < 20 else i)
+        ap, ip = (a.copy(), i)
+        if k < 20:
+            ap[k] += h
+        else:
+            ip += h
+        fd = (ff.stribeck(ap, ip, b.slip_speed_rad_s, b.pressure_mpa, b.plate_temperature_c) - mu) / h
+        assert np.allclose(fd, J[:, k], rtol=1e-3, atol=1e-6 * np.abs(J[:, k]).max())
+
+
+def test_recovers_truth_from_noisy_bench(rc1, bench_rc1):
+    base = td.perturbed_friction(rc1, {k: 0.3 * (-1) ** k for k in range(20)}).with_friction(i=2.0)
+    fit = ff.fit_friction(bench_rc1, base_model=base)
+    a_true = rc1.friction_coefficients
+    assert fit.rmse < 1.2 * 0.002                          # at the noise floor
+    z = (fit.a - a_true) / fit.stderr[:20]
+    assert np.all(np.isfinite(fit.stderr))
+    assert np.max(np.abs(z)) < 4.0, z                      # within the stated uncertainty
+    assert abs(fit.i - rc1.friction_exponent) < 4 * fit.stderr[20]
+    # the friction itself where the bench data lives
+    b = bench_rc1
+    mu_fit = ff.stribeck(fit.a, fit.i, b.slip_speed_rad_s, b.pressure_mpa, b.plate_temperature_c)
+    mu_true = ff.stribeck(a_true, rc1.friction_exponent, b.slip_speed_rad_s, b.pressure_mpa, b.plate_temperature_c)
+    assert np.sqrt(np.mean((mu_fit - mu_true) ** 2)) < 0.0015
+
+
+def test_constraints_hold_on_dense_grid_and_active_ones_reported(rc1, bench_rc1):
+    fit = ff.fit_friction(bench_rc1, base_model=rc1, mu_offset=0.22, n_random_starts=1)
+    g = _grid_extrema(fit.a)
+    assert g["mu_S"][0] > 0
+    assert 0 < g["mu_C"][0] and g["mu_C"][1] < 0.22 + 1e-9
+    assert 0.001 - 1e-9 < g["omega_S"][0] and g["omega_S"][1] < 0.05 + 1e-9
+    assert -0.01 - 1e-9 < g["k_V"][0] and g["k_V"][1] < 0.01 + 1e-9
+    assert fit.i > 0
+    names = [c.name for c in fit.active_constraints]
+    assert "mu_C < 0.22" in names                         # the truth's mu_C reaches 0.24
+    assert all(c.satisfied for c in fit.constraints)
+
+
+def test_joint_refinement_not_worse(rc1, bench_rc1):
+    two = ff.fit_friction(bench_rc1, base_model=rc1, n_random_starts=0)
+    joint = ff.fit_friction(bench_rc1, base_model=rc1, n_random_starts=0, joint=True)
+    assert joint.rmse <= two.rmse + 1e-12
+    assert box.constraints_satisfied(joint.a, joint.i, joint.mu_offset, tol=1e-7)
+
+
+def test_save_writes_model_header_and_sidecar(tmp_path, rc1, bench_rc1):
+    fit = ff.fit_friction(bench_rc1, base_model=rc1, n_random_starts=0)
+    y, j = fit.save(tmp_path / "m.yaml")
+    text = y.read_text()
+    assert text.startswith("# fit-friction:") and "active constraints:" in text
+    m = load_model(y)
+    assert np.allclose(m.friction_coefficients, fit.a) and m.friction_exponent == pytest.approx(fit.i)
+    assert m.data["geometry"] == rc1.data["geometry"]
+    side = json.loads(j.read_text())
+    assert side["rmse"] == pytest.approx(fit.rmse) and "active_constraints" in side and "a4" in side["stderr"]
+
+
+def test_too_little_data_is_a_fit_error(bench_rc1):
+    with pytest.raises(FitError):
+        ff.fit_friction(bench_rc1.subset(np.arange(5)))
