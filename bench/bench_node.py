@@ -12,7 +12,9 @@ Prints:
   clutch_state that echoes it), p50/p99/max;
 and checks them against the targets (step <= 5 % of the period, node <= 60 % of a core,
 >= 99 % of ticks on time, latency p99 <= 1.5 ms in the node and <= 3 ms client to client).
-With --flood HZ a third process publishes applied_force/slip_speed/sump_temperature at HZ each.
+With --flood HZ a third process publishes applied_force/slip_speed/sump_temperature at HZ each
+(the client-to-client latency then only counts the few forces the flood does not overwrite).
+Also prints how many cores other processes kept busy during the window.
 Exit status 0 unless the node died (targets are reported, not enforced).
 """
 from __future__ import annotations
@@ -81,6 +83,22 @@ def model_step_cost(n: int = 50000) -> dict:
 def _cpu_ticks(pid: int) -> float:
     fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def _machine_busy_s() -> float:
+    fields = Path("/proc/stat").read_text().splitlines()[0].split()[1:]
+    user, nice, system, idle, iowait, irq, softirq, steal = (int(x) for x in fields[:8])
+    return (user + nice + system + irq + softirq + steal) / os.sysconf("SC_CLK_TCK")
+
+
+def _proc_cpu_s(pids) -> float:
+    total = 0.0
+    for pid in pids:
+        try:
+            total += _cpu_ticks(pid)
+        except (OSError, IndexError):
+            pass
+    return total
 
 
 def _pct(values, q):
@@ -154,6 +172,8 @@ def run(seconds: float, rate: float, executor: str, flood_hz: float) -> dict:
         # measurement window: inputs at 100 Hz, a new force value every message
         latencies.clear()
         diags.clear()
+        ours = [os.getpid(), node_proc.pid] + ([flood_proc.pid] if flood_proc is not None else [])
+        busy0, ours0 = _machine_busy_s(), _proc_cpu_s(ours)
         cpu0, t0 = _cpu_ticks(node_proc.pid), time.monotonic()
         nxt = t0
         k = 0
@@ -170,6 +190,7 @@ def run(seconds: float, rate: float, executor: str, flood_hz: float) -> dict:
             ex.spin_once(timeout_sec=max(0.0, min(0.002, nxt - time.monotonic())))
         wall = time.monotonic() - t0
         cpu = _cpu_ticks(node_proc.pid) - cpu0
+        others = max(0.0, ((_machine_busy_s() - busy0) - (_proc_cpu_s(ours) - ours0)) / wall)  # approximate
         end = time.monotonic() + 1.2
         while time.monotonic() < end:  # the diagnostics covering the window's end
             ex.spin_once(timeout_sec=0.05)
@@ -195,6 +216,7 @@ def run(seconds: float, rate: float, executor: str, flood_hz: float) -> dict:
             "latency_client_p50_ms": _pct(latencies, 50), "latency_client_p99_ms": _pct(latencies, 99),
             "latency_client_max_ms": max(latencies) if latencies else float("nan"),
             "latency_client_samples": len(latencies), "callback_errors": int(last["callback_errors"]),
+            "other_processes_cores": others, "cpus": os.cpu_count(),
         })
         if flood_proc is not None:
             flood_proc.wait(timeout=30)
@@ -236,6 +258,8 @@ def main() -> int:
     print(f"  latency in node ms     p50 {res['latency_node_p50_ms']:.3f}  p99 {res['latency_node_p99_ms']:.3f}  max {res['latency_node_max_ms']:.3f}")
     print(f"  latency client ms      p50 {res['latency_client_p50_ms']:.3f}  p99 {res['latency_client_p99_ms']:.3f}  "
           f"max {res['latency_client_max_ms']:.3f}  ({res['latency_client_samples']} samples)")
+    print(f"  other processes        {res['other_processes_cores']:8.2f} cores busy of {res['cpus']} "
+          "(figures are only meaningful on an otherwise idle machine)")
     if args.flood:
         print(f"  flood achieved         {res.get('flood_achieved_hz', float('nan')):8.1f} Hz per topic")
     checks = {

@@ -1,0 +1,329 @@
+"""Live replay of car-test bags into the clutch_sim node (like ``ros2 bag play``).
+
+Real time (default): every input message of the bags (/clutch/applied_force,
+/clutch/slip_speed, /clutch/sump_temperature) is published unchanged at its recorded
+timing, scaled by ``rate``; the node runs on its own wall-clock timer.
+
+Lock-step (``clock=True``): deterministic, as fast as the node answers. The node must run
+with use_sim_time:=true (it then steps once per /clock message). For every row of the
+offline replay grid (clutch_model.runs.read_bag: one row per valid applied_force message at or
+after the first valid sample of every input; inputs = latest valid samples at or before
+the row) the player
+
+1. publishes the row's inputs (applied force, slip speed, sump temperature),
+2. publishes /clock = the row's log time t_k,
+3. waits for the node's clutch_state stamped t_k and checks that it echoes the inputs sent.
+   The node takes every input that arrived before a /clock message before it steps, so the
+   state at t_k is integrated from t_{k-1} with row k-1's inputs and sampled with row k's --
+   offline replay's timing. If the answer is missing (lost message) or echoes other inputs
+   (a message overtaken in transit), the inputs and the same /clock time are sent again: the
+   node recomputes a repeated time from the state before it, so a retry is exact.
+
+So the live outputs equal offline replay of the same bags to numerical precision (the node
+publishes the plant torque; offline ``torque_sim`` adds the model's measurement mechanisms,
+none in the reference clutch). Before each bag the player calls the node's ``~/reset``
+(plant restarts like at a new run of offline replay; the dissipated energy restarts at 0,
+while offline replay carries it across bags -- only friction_degradation reads it). The
+handshake needs publish_every = 1.
+
+Topics: the bags' ``/clutch/...`` inputs are published under ``namespace`` (default
+``/clutch``: unchanged); /clock is global, so lock-step must be the only /clock source of the
+ROS domain (live_replay uses a private domain). In real time the node's own rules apply:
+e.g. a gap longer than input_timeout_s in a bag's force makes the force stale (0 N).
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Optional
+
+import numpy as np
+
+from clutch_model.errors import ClutchSimError, DataError
+
+from .bags import bag_start_ns, normalize_namespace, read_messages, read_run, row_times_ns
+
+NODE_NAME = "clutch_sim"
+
+
+class PlayError(ClutchSimError):
+    """The node did not answer (not running, wrong namespace, not in sim time, ...)."""
+
+
+@dataclass
+class BagResult:
+    name: str
+    rows: int = 0
+    t_ns: Optional[np.ndarray] = None
+    torque_nm: Optional[np.ndarray] = None
+    pack_temperature_c: Optional[np.ndarray] = None
+    torque_measured_nm: Optional[np.ndarray] = None
+    run: object = None
+
+
+@dataclass
+class PlayResult:
+    bags: list = field(default_factory=list)
+    retries: int = 0
+    messages: int = 0
+    wall_s: float = 0.0
+
+
+def _stamp_ns(stamp) -> int:
+    return stamp.sec * 1_000_000_000 + stamp.nanosec
+
+
+class Player:
+    """Publishes bag inputs into a node graph. ``node`` is an rclpy Node owned by the caller
+    (spun by ``executor`` inside the player's waits)."""
+
+    def __init__(self, node, executor, namespace: str = "/clutch", *, clock: bool = False, rate: float = 1.0,
+                 reset: bool = True, ack_timeout_s: float = 1.0, max_attempts: int = 20,
+                 discovery_timeout_s: float = 20.0, recorder=None, progress: bool = True,
+                 node_alive=None):
+        from clutch_msgs.msg import ClutchState
+        from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+        from rosgraph_msgs.msg import Clock
+        from sensor_msgs.msg import Temperature
+        from std_msgs.msg import Float64
+        from std_srvs.srv import Trigger
+
+        if not (rate > 0.0):
+            raise DataError(f"--rate must be > 0, got {rate}")
+        self.node, self.executor = node, executor
+        self.ns = normalize_namespace(namespace)
+        self.clock_mode, self.rate, self.reset_each_bag = clock, float(rate), reset
+        self.ack_timeout_s, self.max_attempts = ack_timeout_s, max_attempts
+        self.discovery_timeout_s = discovery_timeout_s
+        self.recorder, self.progress = recorder, progress
+        self.node_alive = node_alive or (lambda: True)   # live_replay: its node subprocess runs
+        qos = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST,
+                         depth=100, durability=DurabilityPolicy.VOLATILE)
+        self._Float64, self._Temperature, self._Clock = Float64, Temperature, Clock
+        self.pubs = {
+            "applied_force": node.create_publisher(Float64, f"{self.ns}/applied_force", qos),
+            "slip_speed": node.create_publisher(Float64, f"{self.ns}/slip_speed", qos),
+            "sump_temperature": node.create_publisher(Temperature, f"{self.ns}/sump_temperature", qos),
+        }
+        self.clock_pub = node.create_publisher(Clock, "/clock", qos) if clock else None
+        self._reset_client = node.create_client(Trigger, f"{self.ns}/{NODE_NAME}/reset")
+        self._Trigger = Trigger
+        self._awaiting: Optional[int] = None
+        self._answer = None
+        if clock:
+            node.create_subscription(ClutchState, f"{self.ns}/clutch_state", self._on_state, qos)
+        self._sim_now_ns = 0
+        self._retries = 0
+        self._step_count = 0
+
+    # ---- helpers -----------------------------------------------------------------------
+    @property
+    def sim_now_ns(self) -> int:
+        """The last /clock time published (log time of recorded outputs in lock-step)."""
+        return self._sim_now_ns
+
+    def _on_state(self, msg) -> None:
+        if self._awaiting is not None and _stamp_ns(msg.header.stamp) == self._awaiting:
+            self._answer = msg
+
+    def _spin_until(self, done, timeout_s: float) -> bool:
+        deadline = time.monotonic() + timeout_s
+        while not done():
+            left = deadline - time.monotonic()
+            if left <= 0.0:
+                return False
+            self.executor.spin_once(timeout_sec=min(left, 0.05))
+        return True
+
+    def wait_for_node(self) -> None:
+        """Wait until the node's subscriptions (and in lock-step its clutch_state and /clock
+        subscription) are matched."""
+        def ready():
+            if not self.node_alive():
+                raise PlayError("the clutch_sim node exited")
+            if any(p.get_subscription_count() == 0 for p in self.pubs.values()):
+                return False
+            if self.clock_mode:
+                if self.clock_pub.get_subscription_count() == 0:
+                    return False
+                if self.node.count_publishers(f"{self.ns}/clutch_state") == 0:
+                    return False
+            return True
+
+        if not self._spin_until(ready, self.discovery_timeout_s):
+            what = "its inputs" if not self.clock_mode else "its inputs, /clock and clutch_state"
+            raise PlayError(f"no clutch_sim node found in namespace {self.ns or '/'} ({what} not "
+                            f"matched within {self.discovery_timeout_s:g} s)"
+                            + ("; lock-step needs the node with use_sim_time:=true" if self.clock_mode else ""))
+        self._spin_until(lambda: False, 0.3)  # let the other side match our endpoints too
+
+    def reset_node(self, timeout_s: float = 5.0) -> bool:
+        if not self._reset_client.wait_for_service(timeout_sec=min(timeout_s, 2.0)):
+            if self.clock_mode:
+                raise PlayError(f"service {self.ns}/{NODE_NAME}/reset not available")
+            self.node.get_logger().warning("no ~/reset service: the node is not reset before the bag")
+            return False
+        future = self._reset_client.call_async(self._Trigger.Request())
+        if not self._spin_until(future.done, timeout_s) or not future.result().success:
+            raise PlayError(f"{self.ns}/{NODE_NAME}/reset did not succeed")
+        return True
+
+    def _temperature(self, value: float, stamp_ns: int, frame_id: str = "", variance: float = 0.0):
+        msg = self._Temperature()
+        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(int(stamp_ns), 1_000_000_000)
+        msg.header.frame_id = frame_id
+        msg.temperature = float(value)
+        msg.variance = float(variance)
+        return msg
+
+    # ---- lock-step ---------------------------------------------------------------------
+    def play_lockstep(self, path, topics=None, bar=None) -> BagResult:
+        run = read_run(path, topics)
+        t_ns = row_times_ns(run)
+        n = len(run)
+        torque, pack = np.full(n, np.nan), np.full(n, np.nan)
+        result = BagResult(name=run.name, rows=n, t_ns=t_ns, torque_nm=torque, pack_temperature_c=pack,
+                           torque_measured_nm=run.torque_measured_nm, run=run)
+        if self.reset_each_bag:
+            self.reset_node()
+        F, Clock = self._Float64, self._Clock
+        pf, pw, ps = (self.pubs[k] for k in ("applied_force", "slip_speed", "sump_temperature"))
+        force_msg, slip_msg, clock_msg = F(), F(), Clock()
+        for k in range(n):
+            f = float(run.applied_force_n[k])
+            w = float(run.slip_speed_rad_s[k])
+            s = float(run.sump_temperature_c[k])
+            t = int(t_ns[k])
+            force_msg.data, slip_msg.data = f, w
+            sump_msg = self._temperature(s, t)
+            clock_msg.clock.sec, clock_msg.clock.nanosec = divmod(t, 1_000_000_000)
+            for attempt in range(self.max_attempts):
+                self._awaiting, self._answer = t, None
+                pf.publish(force_msg)
+                pw.publish(slip_msg)
+                ps.publish(sump_msg)
+                self._sim_now_ns = t
+                self.clock_pub.publish(clock_msg)
+                timeout = self.ack_timeout_s * (1 if attempt < 3 else 3)
+                ok = self._spin_until(lambda: self._answer is not None, timeout)
+                a = self._answer
+                if ok and a.applied_force == f and a.slip_speed == w and a.sump_temperature == s:
+                    break
+                self._retries += 1
+            else:
+                raise PlayError(
+                    f"bag {run.name}: no matching clutch_state from {self.ns}/{NODE_NAME} for clock "
+                    f"{t * 1e-9:.6f} s after {self.max_attempts} attempts (is the node running with "
+                    "use_sim_time:=true and publish_every:=1 in this namespace?)")
+            torque[k] = a.clutch_torque
+            pack[k] = a.pack_temperature
+            self._awaiting = None
+            if self.recorder is not None:  # the other outputs of this step, before the next clock
+                self._flush_recorder()
+            if bar is not None:
+                bar.update(1)
+        return result
+
+    def _flush_recorder(self, timeout_s: float = 0.5) -> None:
+        """Wait until the recorder has written this step's three outputs, so they are logged
+        at this step's time (the player's own clutch_state subscription may run first)."""
+        counts = self.recorder.counts
+        topics = [f"{self.ns}/{name}" for name in ("clutch_torque", "pack_temperature", "clutch_state")]
+        target = self._step_count + 1
+        self._spin_until(lambda: all(counts[t] >= target for t in topics), timeout_s)
+        self._step_count = min(counts[t] for t in topics)
+
+    # ---- real time ---------------------------------------------------------------------
+    def play_realtime(self, path, topics=None, bar=None) -> BagResult:
+        bag = read_messages(path, topics)
+        if self.reset_each_bag:
+            self.reset_node()
+        F = self._Float64
+        msgs = bag.messages
+        t0_bag = msgs[0].t_ns
+        t0_wall = time.monotonic()
+        for m in msgs:
+            due = t0_wall + (m.t_ns - t0_bag) * 1e-9 / self.rate
+            while True:
+                left = due - time.monotonic()
+                if left <= 0.0:
+                    break
+                if left > 0.002:
+                    self.executor.spin_once(timeout_sec=left - 0.001)
+                elif left > 0.0004:
+                    time.sleep(left - 0.0003)
+            if m.topic == "sump_temperature":
+                self.pubs["sump_temperature"].publish(self._temperature(m.value, m.stamp_ns, m.frame_id, m.variance))
+            else:
+                self.pubs[m.topic].publish(F(data=m.value))
+            if bar is not None:
+                bar.update(1)
+        return BagResult(name=bag.name, rows=len(msgs))
+
+    # ---- both --------------------------------------------------------------------------
+    def play(self, paths, topics=None) -> PlayResult:
+        """Play the bags in log-time order (``topics``: clutch_model.runs.TopicNames of the
+        bags' input topics, default /clutch/...)."""
+        from tqdm import tqdm
+
+        self._retries = 0
+        self._step_count = 0
+        paths = [Path(p) for p in paths]
+        if not paths:
+            raise DataError("no bags given")
+        ordered = sorted(((bag_start_ns(p), p) for p in paths), key=lambda x: x[0])
+        self.wait_for_node()
+        out = PlayResult()
+        start = time.monotonic()
+        with tqdm(desc="play" + (" --clock" if self.clock_mode else ""), unit="row" if self.clock_mode else "msg",
+                  disable=None if self.progress else True, leave=False) as bar:
+            for _, path in ordered:
+                res = self.play_lockstep(path, topics, bar) if self.clock_mode else self.play_realtime(path, topics, bar)
+                out.bags.append(res)
+                out.messages += res.rows
+        out.retries = self._retries
+        out.wall_s = time.monotonic() - start
+        return out
+
+
+def play(paths, namespace: str = "/clutch", *, clock: bool = False, rate: float = 1.0, record_out=None,
+         reset: bool = True, topics=None, overwrite: bool = False, progress: bool = True,
+         context=None, domain_id: Optional[int] = None) -> PlayResult:
+    """Play bags into a running node (own rclpy context); optionally record its outputs."""
+    import rclpy
+    from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+    from rclpy.node import Node
+
+    own = context is None
+    if own:
+        context = rclpy.Context()
+        rclpy.init(context=context, domain_id=domain_id)
+    node = Node("clutch_sim_play", context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    recorder = None
+    try:
+        player = Player(node, executor, namespace, clock=clock, rate=rate, reset=reset, progress=progress)
+        if record_out is not None:
+            from .record import Recorder
+
+            log_time = (lambda: player.sim_now_ns) if clock else (lambda: time.time_ns())
+            recorder = Recorder(node, record_out, namespace, log_time=log_time, overwrite=overwrite)
+            player.recorder = recorder
+        try:
+            result = player.play(paths, topics)
+        except (KeyboardInterrupt, ExternalShutdownException):
+            raise KeyboardInterrupt from None
+        if recorder is not None:  # the tail: outputs (and diagnostics) still in flight
+            end = time.monotonic() + (0.3 if clock else 0.6)
+            while time.monotonic() < end:
+                executor.spin_once(timeout_sec=0.05)
+        return result
+    finally:
+        if recorder is not None:
+            recorder.close()
+        executor.shutdown()
+        node.destroy_node()
+        if own:
+            context.try_shutdown()

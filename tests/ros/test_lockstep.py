@@ -1,0 +1,160 @@
+"""Sim-time lock-step: the node driven by /clock gives the offline simulator's numbers
+(clutch_model.simulate / clutch_model.replay.replay_runs) to numerical precision; and
+``clutch-sim play --clock --record`` + ``live_replay`` reproduce offline replay of bags."""
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from .conftest import Io, NodeProcess, stamp_ns, subprocess_env, write_test_bag, REPO
+
+pytestmark = pytest.mark.ros
+
+RTOL, ATOL = 1e-9, 1e-9
+T0 = 1_700_000_000_000_000_000
+
+
+def _lockstep(io: Io, t_ns, force, slip, sump, timeout=5.0):
+    """Drive the node one /clock tick at a time; returns the clutch_state of every tick."""
+    out = []
+    for k, t in enumerate(t_ns):
+        io.send(force[k], slip[k], sump[k])
+        io.clock(int(t))
+        got = []
+
+        def answered():
+            while io.states:
+                m = io.states.pop(0)
+                if stamp_ns(m.header.stamp) == int(t):
+                    got.append(m)
+            return bool(got)
+
+        assert io.client.spin_until(answered, timeout), f"no clutch_state for tick {k}"
+        out.append(got[-1])
+    return out
+
+
+@pytest.fixture(scope="module")
+def sim_node(domain_id, tmp_path_factory):
+    node = NodeProcess(domain_id, ["-r", "__ns:=/ls", "-p", "use_sim_time:=true"],
+                       tmp_path_factory.mktemp("ls"))
+    yield node
+    assert node.stop() == 0, node.log()
+
+
+def test_force_step_lockstep_equals_offline_simulator(client, sim_node):
+    from clutch_model import load_model, simulate
+
+    io = Io(client, "/ls")
+    io.wait_matched(clock=True)
+    n = 300
+    t_ns = T0 + np.arange(n, dtype=np.int64) * 2_000_000          # 500 Hz sim clock
+    force = np.where(np.arange(n) < 60, 500.0, 4000.0)
+    force[220:] = 1200.0                                           # step up, then down
+    slip = np.where(np.arange(n) < 180, 8.0, -3.0)                 # sign change
+    sump = np.full(n, 60.0)
+    states = _lockstep(io, t_ns, force, slip, sump)
+    torque = np.array([m.clutch_torque for m in states])
+    pack = np.array([m.pack_temperature for m in states])
+    assert np.array_equal([m.applied_force for m in states], force)   # inputs echoed exactly
+
+    off = simulate(load_model(None), (t_ns - t_ns[0]) * 1e-9, force, slip, sump)
+    np.testing.assert_allclose(torque, off.torque_nm, rtol=RTOL, atol=ATOL)
+    np.testing.assert_allclose(pack, off.pack_temperature_c, rtol=RTOL, atol=ATOL)
+    np.testing.assert_allclose([m.film_thickness for m in states], off.film_thickness_m, rtol=RTOL, atol=1e-15)
+    np.testing.assert_allclose([m.energy for m in states], off.energy_j, rtol=RTOL, atol=ATOL)
+    assert torque[100] > 5 * torque[30] > 0 and torque[-1] < 0       # the step shows, sign follows slip
+    # clutch_torque and pack_temperature topics carry the same samples
+    client.spin_for(0.2)
+    tq = np.array([m.data for m in io.torques])
+    assert tq.size == n and np.array_equal(tq, torque)
+    assert np.array_equal([m.temperature for m in io.temps], pack)
+    assert [stamp_ns(m.header.stamp) for m in io.temps] == list(t_ns)
+
+    # a repeated /clock time recomputes that step from the state before it with the new inputs
+    force2 = force.copy()
+    force2[-1] = 9000.0
+    (redo,) = _lockstep(io, t_ns[-1:], force2[-1:], slip[-1:], sump[-1:])
+    off2 = simulate(load_model(None), (t_ns - t_ns[0]) * 1e-9, force2, slip, sump)
+    assert redo.clutch_torque == pytest.approx(off2.torque_nm[-1], rel=RTOL)
+    assert redo.clutch_torque != pytest.approx(torque[-1], rel=1e-3)
+
+    # a clock that goes backwards restarts the plant (initial film, pack at the sump, energy 0)
+    (restart,) = _lockstep(io, [T0 - 1_000_000_000], [2000.0], [4.0], [45.0])
+    off3 = simulate(load_model(None), [0.0], [2000.0], [4.0], [45.0])
+    assert restart.energy == 0.0 and restart.pack_temperature == 45.0
+    assert restart.clutch_torque == pytest.approx(off3.torque_nm[0], rel=RTOL)
+
+
+def _read_recording(path):
+    from rosbags.highlevel import AnyReader
+
+    out = {}
+    with AnyReader([path]) as reader:
+        for conn, t, raw in reader.messages():
+            out.setdefault(conn.topic, []).append((t, reader.deserialize(raw, conn.msgtype)))
+    return out
+
+
+def test_play_clock_and_record_equal_offline_replay(domain_id, tmp_path):
+    """clutch-sim play --clock --record (a separate process) against a sim-time node: the
+    recorded outputs equal offline replay of the same bags (MCAP dir, sqlite3 dir, bare .mcap,
+    one with invalid samples), bag after bag."""
+    from clutch_model import load_model
+    from clutch_model.replay import replay_runs
+    from clutch_model.runs import read_bags
+
+    bags = [write_test_bag(tmp_path / "run_01", 1.5, seed=0, start_ns=T0, bad_samples=True),
+            write_test_bag(tmp_path / "run_02", 1.0, seed=1, start_ns=T0 + 60_000_000_000, storage="sqlite3"),
+            write_test_bag(tmp_path / "run_03.mcap", 1.0, seed=2, start_ns=T0 + 120_000_000_000)]
+    node = NodeProcess(domain_id, ["-r", "__ns:=/rigA", "-p", "use_sim_time:=true"], tmp_path)
+    out = tmp_path / "live.mcap"
+    try:
+        cmd = [sys.executable, "-m", "clutch_sim.cli", "play", "--bag", *map(str, reversed(bags)), "--clock",
+               "--namespace", "/rigA", "--record", str(out)]
+        res = subprocess.run(cmd, env=subprocess_env(domain_id), cwd=str(REPO), capture_output=True,
+                             text=True, timeout=120)
+        assert res.returncode == 0, res.stderr + node.log()
+        assert "played 3 bag(s)" in res.stdout
+    finally:
+        assert node.stop() == 0, node.log()
+
+    off = replay_runs(load_model(None), read_bags(bags))
+    rec = _read_recording(out)
+    states = rec["/rigA/clutch_state"]
+    assert len(states) == off.sim.torque_nm.size
+    t_log = np.array([t for t, _ in states])
+    assert np.array_equal(t_log, [stamp_ns(m.header.stamp) for _, m in states])       # logged at sim time
+    rows = np.concatenate([r.start_time_ns + np.round(r.t * 1e9).astype(np.int64) for r in off.campaign.runs])
+    assert np.array_equal(t_log, rows)
+    np.testing.assert_allclose([m.clutch_torque for _, m in states], off.sim.torque_nm, rtol=RTOL, atol=ATOL)
+    np.testing.assert_allclose([m.pack_temperature for _, m in states], off.sim.pack_temperature_c,
+                               rtol=RTOL, atol=ATOL)
+    np.testing.assert_allclose([m.data for _, m in rec["/rigA/clutch_torque"]], off.sim.torque_nm,
+                               rtol=RTOL, atol=ATOL)
+    np.testing.assert_allclose([m.temperature for _, m in rec["/rigA/pack_temperature"]],
+                               off.sim.pack_temperature_c, rtol=RTOL, atol=ATOL)
+    np.testing.assert_array_equal([m.applied_force for _, m in states], off.campaign.force)
+    assert "/diagnostics" in rec
+
+
+def test_live_replay_returns_offline_rmse(domain_id, tmp_path):
+    from clutch_model import load_model
+    from clutch_model.replay import replay_runs
+    from clutch_model.runs import read_bags
+    from clutch_sim_ros.live import live_replay
+
+    bags = [write_test_bag(tmp_path / "run_a", 1.0, seed=3, start_ns=T0),
+            write_test_bag(tmp_path / "run_b", 1.0, seed=4, start_ns=T0 + 30_000_000_000)]
+    summary = live_replay(bags, "/live", tmp_path / "out" / "live.mcap", domain_id=domain_id, progress=False)
+    off = replay_runs(load_model(None), read_bags(bags))
+    assert summary["node_exit_code"] == 0
+    assert summary["rows"] == off.sim.torque_nm.size
+    assert summary["rmse_nm"] == pytest.approx(off.rmse_torque(), rel=1e-9)
+    for run, (name, rmse, _, n) in zip(summary["runs"], off.per_run()):
+        assert (run["bag"], run["rows"]) == (name, n) and run["rmse_nm"] == pytest.approx(rmse, rel=1e-9)
+    rec = _read_recording(tmp_path / "out" / "live.mcap")
+    assert len(rec["/live/clutch_state"]) == summary["rows"]

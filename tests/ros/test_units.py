@@ -1,0 +1,153 @@
+"""Pieces of clutch_sim_ros without a running graph: input validity, parameters, diagnostics,
+the rosbags typestore and the MCAP output."""
+from __future__ import annotations
+
+import json
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytestmark = pytest.mark.ros
+
+
+def test_input_validity_rules():
+    from clutch_sim_ros.validation import valid_force, valid_slip, valid_sump
+
+    assert valid_force(0.0) and valid_force(-500.0) and valid_force(1e6)
+    assert not any(valid_force(x) for x in (math.nan, math.inf, -math.inf, 1e6 + 1))
+    assert valid_slip(-1000.0) and valid_slip(1000.0) and valid_slip(0.0)
+    assert not any(valid_slip(x) for x in (math.nan, 1000.001, -1000.001, math.inf))
+    assert valid_sump(-40.0) and valid_sump(200.0)
+    assert not any(valid_sump(x) for x in (-40.01, 200.01, math.nan))
+
+
+def test_input_channel_holds_last_good_value_and_goes_stale():
+    from clutch_sim_ros.validation import InputChannel
+
+    ch = InputChannel("applied_force")
+    assert ch.value is None and ch.is_stale(0, 0.1)
+    assert ch.offer(100.0)
+    ch.on_tick(1_000_000_000)
+    assert not ch.offer(math.nan) and not ch.offer(2e6)
+    ch.on_tick(1_050_000_000)          # rejected messages do not refresh
+    assert ch.value == 100.0 and (ch.received, ch.rejected) == (3, 2)
+    assert ch.age_s(1_050_000_000) == pytest.approx(0.05)
+    assert not ch.is_stale(1_050_000_000, 0.1) and ch.is_stale(1_200_000_000, 0.1)
+    assert ch.offer(-50.0)             # negative force is valid
+    ch.on_tick(1_300_000_000)
+    assert ch.value == -50.0 and not ch.is_stale(1_300_000_000, 0.1)
+
+
+def test_parameter_defaults_and_ranges():
+    from clutch_sim_ros.params import PARAMETERS, NodeParams, check
+
+    assert {k: v[0] for k, v in PARAMETERS.items()} == {
+        "rate_hz": 1000.0, "publish_every": 1, "clutch_params_file": "", "input_timeout_s": 0.1,
+        "lock_slip_rad_s": 0.001}
+    check(NodeParams())
+    for bad in (dict(rate_hz=0.0), dict(rate_hz=math.nan), dict(publish_every=0),
+                dict(input_timeout_s=-1.0), dict(lock_slip_rad_s=-0.1)):
+        with pytest.raises(ValueError):
+            check(NodeParams(**bad))
+
+
+def test_diagnostics_levels():
+    from diagnostic_msgs.msg import DiagnosticStatus as S
+
+    from clutch_sim_ros import diagnostics as D
+    from clutch_sim_ros.validation import InputChannel
+
+    chans = [InputChannel(n) for n in ("applied_force", "slip_speed", "sump_temperature")]
+    st = D.inputs_status("/n", "/n", chans, 0, 0.1, {})
+    assert st.level == S.ERROR and "no applied_force yet" in st.message
+    for ch, v in zip(chans, (1000.0, 5.0, 60.0)):
+        ch.offer(v)
+        ch.on_tick(0)
+    st = D.inputs_status("/n", "/n", chans, 50_000_000, 0.1, {})
+    assert st.level == S.OK
+    st = D.inputs_status("/n", "/n", chans, 500_000_000, 0.1, {})
+    assert st.level == S.WARN and "counts as 0 N" in st.message
+    st = D.inputs_status("/n", "/n", chans, 1_500_000_000, 0.1, {})
+    assert st.level == S.ERROR
+    chans[1].offer(math.nan)
+    chans[1].on_tick(1_500_000_000)
+    for ch in chans:
+        ch.on_tick(1_500_000_000)
+    st = D.inputs_status("/n", "/n", chans, 1_500_000_000, 0.1, {"slip_speed": 0})
+    vals = D.values_of(st)
+    assert vals["slip_speed.rejected"] == "1" and vals["slip_speed.rejected_recent"] == "1"
+
+
+def test_typestore_hash_matches_compiled_interface():
+    from clutch_sim_ros.bag_types import CLUTCH_STATE, typestore
+
+    ts = typestore()
+    share = Path(sys.prefix) / "share" / "clutch_msgs" / "msg" / "ClutchState.json"
+    if not share.is_file():
+        pytest.skip("clutch_msgs not installed in this prefix")
+    compiled = json.loads(share.read_text())["type_hashes"][0]["hash_string"]
+    assert ts.hash_rihs01(CLUTCH_STATE) == compiled
+    names = [f[0] for f in ts.fielddefs[CLUTCH_STATE][1]]
+    assert names == ["header", "applied_force", "pack_force", "slip_speed", "sump_temperature",
+                     "clutch_torque", "asperity_torque", "hydrodynamic_torque", "friction_coefficient",
+                     "film_thickness", "pack_temperature", "viscosity", "power", "energy", "locked"]
+
+
+def test_rclpy_cdr_decodes_with_typestore_and_mcap_roundtrip(tmp_path):
+    """A ClutchState serialized by rclpy is written raw to a bare .mcap and read back by
+    rosbags (AnyReader) and by mcap_ros2 without ROS."""
+    from clutch_msgs.msg import ClutchState
+    from rclpy.serialization import serialize_message
+
+    from clutch_sim_ros.bag_types import typestore
+    from clutch_sim_ros.record import McapOut
+
+    msg = ClutchState(applied_force=1234.5, pack_force=1200.0, slip_speed=-3.25, sump_temperature=61.0,
+                      clutch_torque=-456.75, energy=12.5, locked=True)
+    msg.header.stamp.sec, msg.header.stamp.nanosec = 17, 250
+    data = serialize_message(msg)
+    decoded = typestore().deserialize_cdr(data, "clutch_msgs/msg/ClutchState")
+    assert (decoded.applied_force, decoded.clutch_torque, decoded.locked) == (1234.5, -456.75, True)
+
+    out = tmp_path / "rec.mcap"
+    bag = McapOut(out)
+    conn = bag.writer.add_connection("/clutch/clutch_state", "clutch_msgs/msg/ClutchState", typestore=typestore())
+    bag.writer.write(conn, 17_000_000_250, data)
+    assert bag.close() == out and out.is_file() and not any(p.name.startswith(".rec") for p in tmp_path.iterdir())
+
+    from rosbags.highlevel import AnyReader
+
+    with AnyReader([out]) as reader:
+        (c, t, raw), = list(reader.messages())
+        m = reader.deserialize(raw, c.msgtype)
+    assert t == 17_000_000_250 and m.slip_speed == -3.25 and m.header.stamp.nanosec == 250
+
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+
+    with open(out, "rb") as fh:
+        (schema, channel, message, ros_msg), = list(make_reader(fh, decoder_factories=[DecoderFactory()])
+                                                    .iter_decoded_messages())
+    assert schema.name == "clutch_msgs/msg/ClutchState" and ros_msg.energy == 12.5
+    with pytest.raises(Exception):
+        McapOut(out)          # never overwritten unless asked
+
+
+def test_bag_reading_for_play(tmp_path):
+    from clutch_sim_ros.bags import read_messages, read_run, row_times_ns
+
+    from .conftest import write_test_bag
+
+    bag = write_test_bag(tmp_path / "run_x", seconds=1.0, bad_samples=True)
+    msgs = read_messages(bag)
+    assert [m.t_ns for m in msgs.messages] == sorted(m.t_ns for m in msgs.messages)
+    assert sum(1 for m in msgs.messages if m.topic == "applied_force") == 100
+    assert any(math.isnan(m.value) for m in msgs.messages)        # real-time play sends them as is
+    run = read_run(bag)
+    t = row_times_ns(run)
+    assert np.all(np.diff(t) > 0) and np.all(np.isfinite(run.applied_force_n))
+    assert t[0] >= max(next(m.t_ns for m in msgs.messages if m.topic == n)
+                       for n in ("applied_force", "slip_speed", "sump_temperature"))
