@@ -52,8 +52,13 @@ def _main() -> int:
         print(f"  (live replay unavailable: {exc})")
         return 0
     figures = live_replay(bags, namespace="/clutch", out_mcap=out / "live.mcap")
-    for key, value in figures.items():
-        print(f"  {key}: {value}")
+    offline = {name: rmse for name, rmse, _, _ in result.per_run()}
+    for run in figures["runs"]:
+        print(f"  {run['bag']}: {run['rows']} rows, live torque RMSE {run['rmse_nm']:7.2f} N*m "
+              f"(offline {offline.get(run['bag'], float('nan')):.2f})")
+    print(f"  all bags: live torque RMSE {figures['rmse_nm']:.2f} N*m, {figures['rows']} lock-step ticks in "
+          f"{figures['wall_s']:.1f} s, {figures['retries']} retries, node exit code {figures['node_exit_code']}")
+    print("\nnext: clutch-sim diagnose --bench bags/bench.csv --bags bags/run_* --out out/diag  (see README)")
     return 0
 
 
