@@ -84,6 +84,7 @@ class Diagnosis:
     calibrated_fit: CandidateFit
     extended_fit: CandidateFit | None
     nominal_pred: np.ndarray
+    noise_phi: float = 0.0
     bench_info: dict = field(default_factory=dict)
     calibration_info: dict = field(default_factory=dict)
     timings: dict = field(default_factory=dict)
@@ -148,9 +149,6 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
     timings["friction correction"] = time.perf_counter() - t0
 
     resid0 = calibrated.residual
-    sigma_rows = F.noise_profile(resid0, campaign.t, campaign.run_start)
-    sigma_rows = np.where(np.isfinite(sigma_rows) & (sigma_rows > 0), sigma_rows,
-                          max(float(np.nanstd(resid0)) * 1e-3, 1e-9))
 
     # candidates: every mechanism alone (one parameter, cheap) on both the car-calibrated and
     # the bench-fitted friction -- a car calibration may have absorbed part of the mechanism --
@@ -182,7 +180,15 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
     calibrated.held_out_rmse_nm = _rmse(resid0, eval_mask)
 
     labels = blocks(campaign.t, eval_mask, campaign.run_index)
-    mse0, excess, noise_ms, scores = score_candidates(resid0, {f.id: f.residual for f in fits}, sigma_rows, labels)
+    # the noise level, from the residual of the model that fits the fit runs best (the least
+    # structure left in it: step transients of an unmodelled lag would otherwise pass for noise)
+    ref = min([calibrated] + fits, key=lambda f: f.fit_rmse_nm)
+    sigma_rows = F.noise_profile(ref.residual, campaign.t, campaign.run_start)
+    sigma_rows = np.where(np.isfinite(sigma_rows) & (sigma_rows > 0), sigma_rows,
+                          max(float(np.nanstd(resid0)) * 1e-3, 1e-9))
+    noise_phi = F.noise_ar1(ref.residual, campaign.run_start)
+    mse0, excess, noise_ms, scores = score_candidates(resid0, {f.id: f.residual for f in fits}, sigma_rows, labels,
+                                                      noise_phi)
     sigma = math.sqrt(noise_ms)
     cause, best, reason = decide(mse0, excess, noise_ms, scores)
     fits.sort(key=lambda f: f.held_out_rmse_nm)
@@ -217,7 +223,8 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
                      scores=scores, features_r2=r2, nominal_model=nominal, bench_model=bench_model,
                      calibrated_model=calibrated.model, extended_model=extended_model, campaign=campaign,
                      calibrated_fit=calibrated, extended_fit=extended_fit, nominal_pred=nominal_rep.torque_sim,
-                     bench_info=bench_info or {}, calibration_info=calibration_info, timings=timings)
+                     bench_info=bench_info or {}, calibration_info=calibration_info, timings=timings,
+                     noise_phi=noise_phi)
 
 
 def _record_energy_history(model: ClutchModel, campaign: Campaign) -> None:

@@ -29,10 +29,29 @@ def noise_sigma(residual: np.ndarray, run_start: np.ndarray) -> float:
     return float(1.4826 * mad / math.sqrt(2.0))
 
 
+def noise_ar1(residual: np.ndarray, run_start: np.ndarray) -> float:
+    """Lag-one correlation phi of the noise, if it is AR(1)-like (a band-limited sensor), from
+    the lag-one autocorrelation rho of the residual's first differences: rho = -(1 - phi)/2
+    (-1/2 for white noise). Differences are clipped at 4 robust sigmas so model-error steps do
+    not count. Clipped to [0, 0.9]."""
+    r = np.asarray(residual, float)
+    d = np.diff(r)
+    ok = np.isfinite(d) & ~run_start[1:]
+    pair = ok[1:] & ok[:-1]
+    if pair.sum() < 50:
+        return 0.0
+    scale = 1.4826 * np.median(np.abs(d[ok] - np.median(d[ok]))) or 1.0
+    dc = np.clip(np.where(ok, d, 0.0), -4 * scale, 4 * scale)
+    rho = float(np.sum(dc[1:] * dc[:-1] * pair) / np.sum(dc[ok] ** 2))
+    return float(min(max(1.0 + 2.0 * rho, 0.0), 0.9))
+
+
 def noise_profile(residual: np.ndarray, t: np.ndarray, run_start: np.ndarray, block_s: float = 1.0):
     """Per-row noise level: the MAD estimate of noise_sigma() over consecutive block_s windows
     of each run, so noise that differs from run to run (or grows with the torque level) is
-    not mistaken for structure. Falls back to the campaign-wide estimate for short blocks."""
+    not mistaken for structure, corrected for AR(1)-correlated noise (differences of such noise
+    have variance 2 sigma^2 (1 - phi), not 2 sigma^2). Falls back to the campaign-wide estimate
+    for short blocks."""
     r = np.asarray(residual, float)
     out = np.full(r.size, noise_sigma(r, run_start))
     starts = np.flatnonzero(run_start)
@@ -46,7 +65,7 @@ def noise_profile(residual: np.ndarray, t: np.ndarray, run_start: np.ndarray, bl
             if d.size >= 20:
                 mad = np.median(np.abs(d - np.median(d)))
                 out[rows] = 1.4826 * mad / math.sqrt(2.0)
-    return out
+    return out / math.sqrt(1.0 - noise_ar1(r, run_start))
 
 
 def _per_run_gradient(y, t, run_start):

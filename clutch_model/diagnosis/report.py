@@ -47,6 +47,7 @@ def report_dict(d: Diagnosis) -> dict:
                  "so drift, temperatures and slip levels are on both sides); held-out inputs still "
                  "drive the campaign's carried state, their torque is never fitted",
         "noise_sigma_nm": d.sigma_nm,
+        "noise_ar1": d.noise_phi,
         "candidates": cand,
         "residual_features_r2": d.features_r2,
         "bench_fit": d.bench_info,

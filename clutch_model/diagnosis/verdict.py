@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-STRUCTURE_MIN = 0.10   # unexplained: baseline MSE must exceed the noise floor by 10 %
+STRUCTURE_MIN = 0.15   # unexplained: baseline MSE must exceed the noise floor by 15 %
 NAMED_MIN = 0.03       # a named cause: by 3 % (and the cause must explain half of it)
 EXPLAIN_MIN = 0.5      # a cause must remove half of the excess MSE
 Z_MIN = 5.0            # matched-filter z of the held-out gain
@@ -73,8 +73,11 @@ def block_t(d, labels):
     return float(means.mean() / (sd / math.sqrt(means.size)))
 
 
-def score_candidates(base_resid, cand_resids: dict, sigma_rows, labels):
-    """sigma_rows: the noise level per row (features.noise_profile)."""
+def score_candidates(base_resid, cand_resids: dict, sigma_rows, labels, noise_phi: float = 0.0):
+    """sigma_rows: the noise level per row (features.noise_profile); noise_phi: its AR(1)
+    correlation (features.noise_ar1), which inflates the variance of sum(r c) for slowly
+    varying corrections c by (1 + phi)/(1 - phi)."""
+    inflation = math.sqrt((1.0 + noise_phi) / (1.0 - noise_phi))
     ok = labels >= 0
     ok &= np.isfinite(base_resid)
     mse0 = float(np.mean(base_resid[ok] ** 2))
@@ -89,7 +92,7 @@ def score_candidates(base_resid, cand_resids: dict, sigma_rows, labels):
         c = np.where(okc, base_resid - np.nan_to_num(r), 0.0)   # candidate's correction
         cc = float(np.dot(c, c))
         cs = float(np.dot(c * c, np.where(okc, sigma_rows, 0.0) ** 2))
-        z = float(np.dot(np.where(okc, base_resid, 0.0), c) / math.sqrt(cs)) if cs > 0 else 0.0
+        z = float(np.dot(np.where(okc, base_resid, 0.0), c) / (inflation * math.sqrt(cs))) if cs > 0 else 0.0
         gain = mse0 - mse
         explained = gain / excess if excess > 0 else 0.0
         scores.append(CandidateScore(cid, math.sqrt(mse), gain, explained, t, z,
