@@ -40,10 +40,6 @@ class SimResult:
     out_of_range: np.ndarray
     asperity_pressure_pa: np.ndarray
 
-    @property
-    def final_energy_j(self) -> float:
-        return float(self.energy_j[-1] + self.power_w[-1] * 0.0) if self.t.size else 0.0
-
 
 @dataclass
 class BatchResult:

@@ -127,7 +127,7 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
     nominal_rep = replay_runs(nominal, campaign)
     nominal_resid = campaign.torque_measured - nominal_rep.torque_sim
     bench_rep = replay_runs(bench_model, campaign)
-    energy_total = float(bench_rep.sim.energy_j[-1] + bench_rep.sim.power_w[-1] * 0.0)
+    energy_total = float(bench_rep.sim.energy_j[-1])
     torque_scale = float(np.nanpercentile(np.abs(campaign.torque_measured), 95))
     sigma_guess = F.noise_sigma(campaign.torque_measured - bench_rep.torque_sim, campaign.run_start)
     if not np.isfinite(sigma_guess) or sigma_guess <= 0:
