@@ -33,7 +33,7 @@ def add_parser(sub):
 def run(args) -> int:
     from clutch_model.bench import read_bench
     from clutch_model.diagnosis.calibration import car_calibration
-    from clutch_model.diagnosis.engine import diagnose_campaign
+    from clutch_model.diagnosis.engine import choose_held_out, diagnose_campaign
     from clutch_model.diagnosis.report import write_report
     from clutch_model.errors import ParamsError
     from clutch_model.identification.friction_fit import fit_friction
@@ -49,6 +49,11 @@ def run(args) -> int:
     nominal = load_model(args.params)
     bench = read_bench(args.bench)
     runs = load_runs(args, args.bags)
+    names = [r.name for r in runs]
+    missing = sorted(set(args.held_out or []) - set(names))
+    if missing:
+        raise ParamsError(f"held-out run not in the campaign: {missing[0]}")
+    choose_held_out(names)  # checks there is something to hold out, before the slow work
 
     def say(msg):
         print(f"diagnose: {msg}", file=sys.stderr, flush=True)
