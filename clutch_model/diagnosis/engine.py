@@ -190,7 +190,9 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
     mse0, excess, noise_ms, scores = score_candidates(resid0, {f.id: f.residual for f in fits}, sigma_rows, labels,
                                                       noise_phi)
     sigma = math.sqrt(noise_ms)
-    cause, best, reason = decide(mse0, excess, noise_ms, scores)
+    held_meas = campaign.torque_measured[eval_mask]
+    torque_ms = float(np.nanmean(held_meas ** 2)) if np.isfinite(held_meas).any() else 0.0
+    cause, best, reason = decide(mse0, excess, noise_ms, scores, torque_ms)
     fits.sort(key=lambda f: f.held_out_rmse_nm)
 
     # features of the calibrated residual (evidence)

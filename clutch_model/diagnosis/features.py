@@ -118,9 +118,11 @@ def feature_signals(campaign: Campaign, sim, energy_j: np.ndarray) -> dict:
                 last = -1.0
             direction[k] = last
     angle = np.zeros_like(w)
+    turning = np.zeros(w.size, bool)   # runs where the slip angle covers >= 3 revolutions
     for a, b in _segments(c.run_start):
         dt = np.diff(t[a:b], prepend=t[a])
         angle[a:b] = np.cumsum(w[a:b] * dt)
+        turning[a:b] = np.ptp(angle[a:b]) >= 6 * np.pi
     p_mpa = sim.pressure_mpa
     scale_t = max(np.nanstd(torque), 1e-9)
     return {
@@ -133,7 +135,8 @@ def feature_signals(campaign: Campaign, sim, energy_j: np.ndarray) -> dict:
         "pack temperature": (theta - 60.0)[:, None] / 100.0,
         "dissipated energy (campaign)": (energy_j / max(energy_j.max(), 1.0) * torque)[:, None] / scale_t,
         "pressure x temperature": (p_mpa * (theta - 60.0) / 100.0 * torque)[:, None] / scale_t,
-        "slip angle (once per rev)": np.column_stack([np.sin(angle), np.cos(angle)]) * torque[:, None] / scale_t,
+        "slip angle (once per rev)": (np.column_stack([np.sin(angle), np.cos(angle)])
+                                      * (torque * turning)[:, None] / scale_t),
         "time in run": _time_in_run(t, c.run_start)[:, None],
     }
 

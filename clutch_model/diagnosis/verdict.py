@@ -14,7 +14,9 @@ refitted candidate, and the noise level sigma estimated from the data. Rules:
    against noise that is not white, also a positive one-sided t statistic on per-block
    (BLOCK_S seconds) mean gains (t > T_MIN);
    among winners the lowest held-out RMSE is named;
-3. structure without a winner is `unexplained`.
+3. structure without a winner is `unexplained` -- if it is also material: its RMS must exceed
+   MATERIAL of the held-out torque's RMS (a 0.3 % friction misfit is not a discovery, even when
+   the sensor is so quiet that it stands far above the noise).
 """
 from __future__ import annotations
 
@@ -25,6 +27,7 @@ import numpy as np
 
 STRUCTURE_MIN = 0.15   # unexplained: baseline MSE must exceed the noise floor by 15 %
 NAMED_MIN = 0.03       # a named cause: by 3 % (and the cause must explain half of it)
+MATERIAL = 0.005       # unexplained structure must exceed 0.5 % of the torque (RMS)
 EXPLAIN_MIN = 0.5      # a cause must remove half of the excess MSE
 Z_MIN = 5.0            # matched-filter z of the held-out gain
 T_MIN = 1.0            # block t statistic of the held-out gain (guard)
@@ -100,8 +103,9 @@ def score_candidates(base_resid, cand_resids: dict, sigma_rows, labels, noise_ph
     return mse0, excess, noise_ms, sorted(scores, key=lambda s: s.rmse)
 
 
-def decide(mse0, excess, noise_ms, scores):
-    """-> (cause id, winning score or None, reason)."""
+def decide(mse0, excess, noise_ms, scores, torque_ms=0.0):
+    """-> (cause id, winning score or None, reason). torque_ms: mean square of the held-out
+    measured torque (materiality of unexplained structure)."""
     rel = excess / noise_ms if noise_ms > 0 else math.inf
     winners = [s for s in scores if s.significant and s.explained >= EXPLAIN_MIN]
     if winners and rel >= NAMED_MIN:
@@ -111,5 +115,9 @@ def decide(mse0, excess, noise_ms, scores):
     if rel < STRUCTURE_MIN:
         return "none", None, (f"held-out mean-square error is only {100 * rel:.1f} % above the noise floor "
                               f"(threshold {100 * STRUCTURE_MIN:.0f} %) and no candidate removes most of it")
+    if excess < MATERIAL ** 2 * torque_ms:
+        return "none", None, (f"the structure above the noise floor has an RMS of {math.sqrt(max(excess, 0.0)):.2f} N*m, "
+                              f"below {100 * MATERIAL:.1f} % of the torque's RMS ({math.sqrt(torque_ms):.0f} N*m): "
+                              f"calibration-level misfit, and no candidate removes most of it")
     return "unexplained", None, (f"held-out mean-square error is {100 * rel:.0f} % above the noise floor and no "
                                  f"candidate removes {100 * EXPLAIN_MIN:.0f} % of it significantly")
