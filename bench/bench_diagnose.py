@@ -6,6 +6,9 @@ per stage.
 Hit rate: campaigns from the virtual test car with every catalog mechanism, none, and both
 effects outside the catalog, magnitudes drawn log-uniformly over each effect's visible range,
 over --seeds seeds (default 2; each campaign takes ~15-30 s on this 2-core machine).
+Gain on unseen runs: each campaign has 3 more runs after the 9 diagnosed ones; `clutch-sim
+replay` of calibrated_model.yaml and extended_model.yaml on those 3 bags alone (as an outside
+check would do) gives the gain that holds on runs diagnose never saw.
 
     python bench/bench_diagnose.py [--seeds N] [--first-seed S] [--speed-only]
 """
@@ -27,7 +30,7 @@ CASES = ["none", "actuator_lag", "actuator_hysteresis", "spring_preload", "frict
          "torque_offset", "transport_delay", "drag_torque", "torque_ripple", "pressure_temperature_cross"]
 
 
-def campaign(tmp: Path, seed: int, case: str, n_runs=9, duration=9.0):
+def campaign(tmp: Path, seed: int, case: str, n_runs=9, duration=9.0, extra_runs=0):
     from clutch_model.synth import EXTRA_EFFECTS, VISIBLE_RANGE, CampaignSpec, synthesize_campaign, write_campaign
 
     rng = np.random.default_rng([seed, CASES.index(case)])
@@ -38,20 +41,40 @@ def campaign(tmp: Path, seed: int, case: str, n_runs=9, duration=9.0):
             mag = float(np.exp(rng.uniform(np.log(rr[0]), np.log(rr[1]))))
         key = "extra_effect" if case in EXTRA_EFFECTS else "mechanism"
         kw = {key: case, "magnitude": mag}
-    spec = CampaignSpec(seed=seed, n_runs=n_runs, run_duration_s=duration, **kw)
+    spec = CampaignSpec(seed=seed, n_runs=n_runs + extra_runs, run_duration_s=duration, **kw)
     write_campaign(synthesize_campaign(spec), tmp)
     return spec, mag
 
 
-def diagnose(tmp: Path):
+def diagnose(tmp: Path, n_runs=None):
     from clutch_sim.cli import main as cli
 
-    bags = sorted(str(p) for p in (tmp / "bags").iterdir())
+    bags = sorted(str(p) for p in (tmp / "bags").iterdir())[:n_runs]
     t0 = time.perf_counter()
     rc = cli(["diagnose", "--bench", str(tmp / "bench.csv"), "--bags", *bags, "--out", str(tmp / "diag")])
     wall = time.perf_counter() - t0
     assert rc == 0
     return json.loads((tmp / "diag" / "report.json").read_text()), wall
+
+
+def unseen_gain(tmp: Path, n_runs: int):
+    """(calibrated, extended) torque RMSE of `clutch-sim replay` on the runs after the first n_runs."""
+    import contextlib
+    import csv
+    import io
+
+    from clutch_sim.cli import main as cli
+
+    bags = sorted(str(p) for p in (tmp / "bags").iterdir())[n_runs:]
+    out = []
+    for name in ("calibrated_model.yaml", "extended_model.yaml"):
+        csv_path = tmp / f"unseen_{name}.csv"
+        with contextlib.redirect_stdout(io.StringIO()):
+            assert cli(["replay", "--bag", *bags, "--params", str(tmp / "diag" / name), "--out", str(csv_path)]) == 0
+        rows = list(csv.DictReader(csv_path.open()))
+        err = np.array([float(r["torque_sim"]) - float(r["torque_measured"]) for r in rows if r["torque_measured"]])
+        out.append(float(np.sqrt(np.mean(err ** 2))))
+    return out
 
 
 def main() -> int:
@@ -75,8 +98,9 @@ def main() -> int:
     for seed in range(args.first_seed, args.first_seed + args.seeds):
         for case in CASES:
             with tempfile.TemporaryDirectory() as tmp:
-                spec, mag = campaign(Path(tmp), seed, case)
-                rep, wall = diagnose(Path(tmp))
+                spec, mag = campaign(Path(tmp), seed, case, extra_runs=3)
+                rep, wall = diagnose(Path(tmp), n_runs=9)
+                unseen = unseen_gain(Path(tmp), 9)
             ok = rep["cause"]["id"] == spec.expected_cause
             hits += ok
             total += 1
@@ -84,7 +108,8 @@ def main() -> int:
             mag_s = f"{mag:.4g}" if mag is not None else "default"
             print(f"seed {seed} {case:27s} magnitude {mag_s:<10s} -> "
                   f"{rep['cause']['id']:22s} {'ok ' if ok else 'MISS'} held-out RMSE cal {r['calibrated']:.1f} "
-                  f"ext {r['extended']:.1f} N*m, noise {rep['noise_sigma_nm']:.1f}, {wall:.0f} s", flush=True)
+                  f"ext {r['extended']:.1f} N*m, noise {rep['noise_sigma_nm']:.1f}; unseen runs: cal "
+                  f"{unseen[0]:.1f} ext {unseen[1]:.1f} N*m; {wall:.0f} s", flush=True)
     print(f"hit rate: {hits}/{total}")
     return 0
 
