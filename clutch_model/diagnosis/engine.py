@@ -242,8 +242,9 @@ def _record_energy_history(model: ClutchModel, campaign: Campaign) -> None:
 
 
 def _evidence(cause, reason, sigma, rmse, scores, r2, params) -> str:
-    top = sorted(r2.items(), key=lambda kv: -kv[1])[:3]
-    follows = ", ".join(f"{k} (R² {v:.2f})" for k, v in top)
+    top = [(k, v) for k, v in sorted(r2.items(), key=lambda kv: -kv[1])[:3] if v >= 0.05]
+    follows = (", ".join(f"{k} (R² {v:.2f})" for k, v in top) if top
+               else "none of the candidate features (each explains < 5 % of it)")
     ranked = "; ".join(f"{s.id} {s.rmse:.1f} N·m (z={s.z_stat:.1f}, explains {100 * s.explained:.0f} %)"
                        for s in scores[:3])
     base = (f"On the held-out runs the calibrated baseline has RMSE {rmse['calibrated']:.2f} N·m against a "

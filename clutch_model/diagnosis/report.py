@@ -197,7 +197,8 @@ def _html(d: Diagnosis, rep: dict, files) -> str:
         z = "" if c["z"] is None else f"{c['z']:.1f}"
         pars = ", ".join(f"{k}={v:.4g}" for k, v in c["parameters"].items())
         cls = " class=win" if c["id"] == d.cause_id else ""
-        rows.append(f"<tr{cls}><td>{e(c['id'])}</td><td>{c['held_out_rmse_nm']:.2f}</td>"
+        star = " *" if c["refit_with_friction"] else ""
+        rows.append(f"<tr{cls}><td>{e(c['id'])}{star}</td><td>{c['held_out_rmse_nm']:.2f}</td>"
                     f"<td>{c['fit_rmse_nm']:.2f}</td><td>{expl}</td><td>{z}</td><td>{e(pars)}</td></tr>")
     rows = "".join(rows)
     r = rep["rmse_nm"]
@@ -213,7 +214,7 @@ td:first-child{{text-align:left}}tr.win{{background:#dfd}}img{{max-width:100%}}<
 ({rep['gain_pct']:.1f} %); nominal RC-1 {r['nominal']:.2f} N·m; noise level {d.sigma_nm:.2f} N·m (estimated from the data).</p>
 <p>{e(d.evidence)}</p>
 <p><b>Held-out runs:</b> {e(', '.join(d.held_out))} — {e(rep['split'])}.</p>
-<h3>Candidates (each refitted with the same friction correction as the baseline)</h3>
+<h3>Candidates (each mechanism fitted on the fit runs; * = refitted jointly with the baseline's friction correction)</h3>
 <table><tr><th>id</th><th>held-out RMSE [N·m]</th><th>fit RMSE</th><th>explains</th><th>z</th><th>parameters</th></tr>
 {rows}</table>
 <h3>Evidence</h3>{imgs}
