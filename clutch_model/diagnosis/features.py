@@ -63,9 +63,19 @@ def noise_profile(residual: np.ndarray, t: np.ndarray, run_start: np.ndarray, bl
             d = np.diff(r[rows])
             d = d[np.isfinite(d)]
             if d.size >= 20:
-                mad = np.median(np.abs(d - np.median(d)))
-                out[rows] = 1.4826 * mad / math.sqrt(2.0)
+                out[rows] = _robust_rms(d) / math.sqrt(2.0)
     return out / math.sqrt(1.0 - noise_ar1(r, run_start))
+
+
+def _robust_rms(d: np.ndarray) -> float:
+    """RMS of d after dropping outliers beyond 5 MAD-sigmas (model-error steps): nearly the
+    efficiency of the plain RMS for Gaussian noise (MAD alone has 37 %, which made the noise
+    floor of three held-out runs uncertain by +-5 %)."""
+    s0 = 1.4826 * np.median(np.abs(d - np.median(d)))
+    if s0 <= 0:
+        return float(np.sqrt(np.mean(d ** 2)))
+    kept = d[np.abs(d - np.median(d)) <= 5.0 * s0]
+    return float(np.sqrt(np.mean((kept - np.mean(kept)) ** 2)))
 
 
 def _per_run_gradient(y, t, run_start):

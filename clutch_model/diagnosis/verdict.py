@@ -15,7 +15,7 @@ refitted candidate, and the noise level sigma estimated from the data. Rules:
    (BLOCK_S seconds) mean gains (t > T_MIN);
    among winners the lowest held-out RMSE is named;
 3. structure without a winner is `unexplained` -- if it is also material: its RMS must exceed
-   MATERIAL of the held-out torque's RMS (a 0.3 % friction misfit is not a discovery, even when
+   MATERIAL of the held-out torque's RMS (a 0.2 % friction misfit is not a discovery, even when
    the sensor is so quiet that it stands far above the noise).
 """
 from __future__ import annotations
@@ -25,9 +25,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-STRUCTURE_MIN = 0.15   # unexplained: baseline MSE must exceed the noise floor by 15 %
+STRUCTURE_MIN = 0.12   # unexplained: baseline MSE must exceed the noise floor by 12 %
 NAMED_MIN = 0.03       # a named cause: by 3 % (and the cause must explain half of it)
-MATERIAL = 0.005       # unexplained structure must exceed 0.5 % of the torque (RMS)
+MATERIAL = 0.003       # unexplained structure must exceed 0.3 % of the torque (RMS)
 EXPLAIN_MIN = 0.5      # a cause must remove half of the excess MSE
 Z_MIN = 5.0            # matched-filter z of the held-out gain
 T_MIN = 1.0            # block t statistic of the held-out gain (guard)
