@@ -3,8 +3,9 @@
 1. fit the friction model on the bench (thesis §5.2.1);
 2. calibrate on the car runs it fits on (regression + Monte Carlo, thesis §5.3), holding runs
    out: every third run from the second (interleaved in time, so drift, temperatures and
-   slip levels are on both sides; the held-out runs' inputs still drive the campaign's
-   carried state, their torque is never fitted);
+   slip levels are on both sides), moved off the campaign's extreme slip/temperature runs so
+   validation stays inside the fit runs' envelope; the held-out runs' inputs still drive the
+   campaign's carried state, their torque is never fitted;
 3. show what the baseline gets wrong (residual features, lag, loops, drift);
 4. name the cause: fit every catalog mechanism (jointly with the same friction correction the
    baseline got) and compare on the held-out runs against the noise level (verdict.py);
@@ -53,14 +54,35 @@ def smooth_sump(campaign: Campaign, window_s: float = 2.0) -> Campaign:
     return Campaign(runs)
 
 
-def choose_held_out(names: list) -> list:
-    """Every third run from the second (time order); one run when there are two or three."""
+def choose_held_out(names: list, runs=None) -> list:
+    """Every third run from the second (time order); one run when there are two or three.
+
+    With the runs given, a chosen run that holds an extreme of the campaign (highest or lowest
+    mean |slip| or sump temperature) is swapped for its next (else previous) neighbour in time
+    that holds none: the held-out runs then test the model inside the fit runs' operating
+    envelope instead of an extrapolation of the calibration (a k_V*w friction term fitted at
+    slips up to 8 rad/s can pass for drag torque there, and not at 14 rad/s)."""
     n = len(names)
     if n < 2:
         raise DataError("diagnose needs at least 2 car-test runs (one is held out for validation)")
     if n <= 3:
-        return [names[n // 2]] if n == 3 else [names[-1]]
-    return [names[k] for k in range(1, n, 3)]
+        picks = [n // 2] if n == 3 else [n - 1]
+    else:
+        picks = list(range(1, n, 3))
+    if runs is not None and n >= 4:
+        slip = np.array([float(np.mean(np.abs(r.slip_speed_rad_s))) for r in runs])
+        sump = np.array([float(np.mean(r.sump_temperature_c)) for r in runs])
+        extreme = {int(np.argmax(slip)), int(np.argmin(slip)), int(np.argmax(sump)), int(np.argmin(sump))}
+        chosen = set()
+        for k in picks:
+            if k in extreme:
+                for j in (k + 1, k - 1, k + 2, k - 2):
+                    if 0 <= j < n and j not in extreme and j not in chosen and j not in picks:
+                        k = j
+                        break
+            chosen.add(k)
+        picks = sorted(chosen)
+    return [names[k] for k in picks]
 
 
 @dataclass
@@ -111,7 +133,7 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
     names = campaign.names
     if not np.isfinite(campaign.torque_measured).any():
         raise DataError("the bags have no /clutch/measured_torque: nothing to diagnose against")
-    held_out = list(held_out) if held_out else choose_held_out(names)
+    held_out = list(held_out) if held_out else choose_held_out(names, campaign.runs)
     unknown = set(held_out) - set(names)
     if unknown:
         raise DataError(f"held-out run not in the campaign: {sorted(unknown)[0]}")

@@ -44,8 +44,10 @@ def report_dict(d: Diagnosis) -> dict:
         "held_out_runs": d.held_out,
         "fit_runs": d.fit_runs,
         "split": "every third run from the second, in log-time order (interleaved over the campaign "
-                 "so drift, temperatures and slip levels are on both sides); held-out inputs still "
-                 "drive the campaign's carried state, their torque is never fitted",
+                 "so drift, temperatures and slip levels are on both sides), moved off the runs with "
+                 "the campaign's extreme slip or sump temperature so validation stays inside the fit "
+                 "runs' envelope; held-out inputs still drive the campaign's carried state, their "
+                 "torque is never fitted",
         "noise_sigma_nm": d.sigma_nm,
         "noise_ar1": d.noise_phi,
         "candidates": cand,
