@@ -23,6 +23,7 @@ from ..errors import DataError
 from ..params import ClutchModel
 from ..replay import replay_runs
 from ..runs import Campaign
+from ..simulate import SimResult
 from . import features as F
 from .fitting import CANDIDATE_IDS, CandidateFit, fit_candidate
 from .verdict import blocks, decide, score_candidates
@@ -104,6 +105,7 @@ class Diagnosis:
     extended_model: ClutchModel
     campaign: Campaign
     calibrated_fit: CandidateFit
+    calibrated_sim: SimResult        # plant signals of the calibrated model on the campaign
     extended_fit: CandidateFit | None
     nominal_pred: np.ndarray
     noise_phi: float = 0.0
@@ -179,13 +181,13 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
     fits, tried = {}, {}
     ids = list(candidates) if candidates else CANDIDATE_IDS
     t0 = time.perf_counter()
-    starts = [("calibrated", calibrated.model, cal_base)]
+    starts = [(calibrated.model, cal_base)]
     if cal_base is not bench_model:
-        starts.append(("bench", bench_model, bench_model))
+        starts.append((bench_model, bench_model))
     for cid in ids:
         say(f"fitting candidate {cid}")
         tried[cid] = []
-        for label, start_model, joint_base in starts:
+        for start_model, joint_base in starts:
             fit = fit_candidate(start_model, campaign, fit_mask, cid, energy_total, torque_scale,
                                 fit_friction=False, noise_sigma_nm=sigma_guess)
             tried[cid].append((fit, joint_base))
@@ -223,7 +225,7 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
 
     # features of the calibrated residual (evidence)
     sim_cal = replay_runs(calibrated.model, campaign).sim
-    feats = F.feature_signals(campaign, sim_cal, sim_cal.energy_j)
+    feats = F.feature_signals(campaign, sim_cal)
     r2 = F.explained_variance(resid0, feats, campaign.run_index)
 
     extended_fit = None
@@ -250,7 +252,8 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
                      sigma_nm=sigma, rmse=rmse, held_out=held_out, fit_runs=fit_runs, candidates=fits,
                      scores=scores, features_r2=r2, nominal_model=nominal, bench_model=bench_model,
                      calibrated_model=calibrated.model, extended_model=extended_model, campaign=campaign,
-                     calibrated_fit=calibrated, extended_fit=extended_fit, nominal_pred=nominal_rep.torque_sim,
+                     calibrated_fit=calibrated, calibrated_sim=sim_cal, extended_fit=extended_fit,
+                     nominal_pred=nominal_rep.torque_sim,
                      bench_info=bench_info or {}, calibration_info=calibration_info, timings=timings,
                      noise_phi=noise_phi)
 

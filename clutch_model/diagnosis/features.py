@@ -110,7 +110,7 @@ class FeatureSet:
     columns: dict           # name -> (n, k) design block
 
 
-def feature_signals(campaign: Campaign, sim, energy_j: np.ndarray) -> dict:
+def feature_signals(campaign: Campaign, sim) -> dict:
     """Signals a residual may follow, each as a design block (columns)."""
     c = campaign
     t, f, w = c.t, np.maximum(c.force, 0.0), c.slip
@@ -143,7 +143,7 @@ def feature_signals(campaign: Campaign, sim, energy_j: np.ndarray) -> dict:
         "force direction (hysteresis)": (direction * f)[:, None] / max(f.max(), 1.0),
         "slip speed": w[:, None] / max(np.abs(w).max(), 1e-9),
         "pack temperature": (theta - 60.0)[:, None] / 100.0,
-        "dissipated energy (campaign)": (energy_j / max(energy_j.max(), 1.0) * torque)[:, None] / scale_t,
+        "dissipated energy (campaign)": (sim.energy_j / max(sim.energy_j.max(), 1.0) * torque)[:, None] / scale_t,
         "pressure x temperature": (p_mpa * (theta - 60.0) / 100.0 * torque)[:, None] / scale_t,
         "slip angle (once per rev)": (np.column_stack([np.sin(angle), np.cos(angle)])
                                       * (torque * turning)[:, None] / scale_t),

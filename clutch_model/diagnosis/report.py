@@ -89,11 +89,11 @@ def _plots(d: Diagnosis, out: Path) -> list:
     files.append(("torque_held_out.png", "Held-out runs: measured torque and the models"))
 
     # 2. residual against the candidate features
-    sim = d.calibrated_fit
-    fr = F.feature_signals(c, _sim_of(d), _sim_of(d).energy_j)
+    sim = d.calibrated_sim
+    fr = F.feature_signals(c, sim)
     dfdt = fr["force rate dF/dt"][:, 0]
-    theta = _sim_of(d).pack_temperature_c
-    energy = _sim_of(d).energy_j
+    theta = sim.pack_temperature_c
+    energy = sim.energy_j
     panels = [("t (campaign order) [s]", _campaign_time(c)), ("applied force [N]", c.force),
               ("force rate (normalised)", dfdt), ("slip speed [rad/s]", c.slip),
               ("pack temperature [°C]", theta), ("dissipated energy [J]", energy)]
@@ -155,13 +155,6 @@ def _plots(d: Diagnosis, out: Path) -> list:
     plt.close(fig)
     files.append(("candidates.png", "Held-out RMSE of every refitted candidate"))
     return files
-
-
-def _sim_of(d: Diagnosis):
-    if not hasattr(d, "_cal_sim"):
-        from ..replay import replay_runs
-        d._cal_sim = replay_runs(d.calibrated_model, d.campaign).sim
-    return d._cal_sim
 
 
 def _campaign_time(c):
