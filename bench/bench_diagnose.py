@@ -31,7 +31,7 @@ CASES = ["none", "actuator_lag", "actuator_hysteresis", "spring_preload", "frict
 
 
 def campaign(tmp: Path, seed: int, case: str, n_runs=9, duration=9.0, extra_runs=0):
-    from clutch_model.synth import EXTRA_EFFECTS, VISIBLE_RANGE, CampaignSpec, synthesize_campaign, write_campaign
+    from clutch_model.virtual_car.campaign import EXTRA_EFFECTS, VISIBLE_RANGE, CampaignSpec, synthesize_campaign, write_campaign
 
     rng = np.random.default_rng([seed, CASES.index(case)])
     kw, mag = {}, None

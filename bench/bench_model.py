@@ -42,7 +42,7 @@ def timeit(fn, repeat=3):
 
 def main() -> int:
     t0 = time.perf_counter()
-    from clutch_model import kernels as K
+    from clutch_model.plant import kernels as K
     from clutch_model import load_model, simulate, simulate_batch
     import_s = time.perf_counter() - t0
     model = load_model()
@@ -91,9 +91,9 @@ def main() -> int:
           f"-> {ivp / ours:,.0f}x faster than solve_ivp")
 
     print("\n== whole replay (bag decoding + simulation + CSV), 2 min at 200 Hz")
-    from clutch_model.bagwriter import write_run_bag
+    from clutch_model.formats.bag_writer import write_run_bag
     from clutch_model.replay import replay_runs, write_replay_csv
-    from clutch_model.runs import read_bags
+    from clutch_model.formats.bag_reader import read_bags
     t, f, w, s = car_inputs(120.0, 200)
     torque = simulate(model, t, f, w, s).torque_nm
     with tempfile.TemporaryDirectory() as tmp:

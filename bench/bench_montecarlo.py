@@ -38,7 +38,7 @@ def load_avg() -> str:
 
 
 def throughput(model, truth, n_samples, use_dask):
-    from clutch_model.identification import testdata as td
+    from clutch_model.virtual_car import identification_data as td
     from clutch_model.identification.montecarlo import run_montecarlo
 
     runs = td.synthetic_runs(truth, n_runs=8, duration_s=15.0, rate_hz=200.0, noise_nm=15.0, seed=101)
@@ -78,7 +78,7 @@ def throughput(model, truth, n_samples, use_dask):
 
 
 def calibrate_timing(model, truth):
-    from clutch_model.identification import testdata as td
+    from clutch_model.virtual_car import identification_data as td
     from clutch_model.identification.calibrate import calibrate_friction
 
     runs = td.synthetic_runs(truth, n_runs=6, duration_s=9.0, rate_hz=200.0, noise_nm=15.0, seed=7)
@@ -93,7 +93,7 @@ def calibrate_timing(model, truth):
 
 
 def compare(model, truth):
-    from clutch_model.identification import testdata as td
+    from clutch_model.virtual_car import identification_data as td
     from clutch_model.identification.calibrate import calibrate_friction
     from clutch_model.identification.evaluate import CampaignInputs, rmse_of
     from clutch_model.identification.montecarlo import run_montecarlo
@@ -154,7 +154,7 @@ def main():
     ap.add_argument("--json", default=None, metavar="PATH")
     args = ap.parse_args()
     from clutch_model import load_model
-    from clutch_model.identification import testdata as td
+    from clutch_model.virtual_car import identification_data as td
 
     model = load_model()
     truth = td.perturbed_friction(model, TRUTH_REL)

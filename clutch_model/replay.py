@@ -14,9 +14,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .params import ClutchModel
-from .runs import Campaign
-from .simulate import SimResult, predict_measured_torque, simulate
+from clutch_model.plant.params import ClutchModel
+from clutch_model.formats.bag_reader import Campaign
+from clutch_model.plant.simulate import SimResult, predict_measured_torque, simulate
 
 
 @dataclass

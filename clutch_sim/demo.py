@@ -25,13 +25,13 @@ def main() -> int:
 
 
 def _main() -> int:
-    from clutch_model.params import load_model
+    from clutch_model.plant.params import load_model
     from clutch_model.replay import replay_runs, write_replay_csv
-    from clutch_model.runs import read_bags
+    from clutch_model.formats.bag_reader import read_bags
 
     bags = sorted(p for p in (ROOT / "bags").iterdir() if p.is_dir() and (p / "metadata.yaml").exists())
     if not bags:
-        print("make run: no sample bags in bags/ (python -m clutch_model.sample_data writes them)", file=sys.stderr)
+        print("make run: no sample bags in bags/ (python -m clutch_model.virtual_car.sample_bags writes them)", file=sys.stderr)
         return 1
     out = ROOT / "out"
     out.mkdir(exist_ok=True)

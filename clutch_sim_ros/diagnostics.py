@@ -30,7 +30,7 @@ from typing import Iterable, Optional
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 
-from .validation import InputChannel
+from clutch_model.plant.inputs import InputChannel
 
 OK, WARN, ERROR = DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR
 P_BOX_MPA = (0.0, 20.0)
@@ -189,7 +189,7 @@ def timing_status(name: str, hw: str, c: Counters, t: Timing, *, sim_time: bool,
 
 def plant_status(name: str, hw: str, c: Counters, record: Optional[np.ndarray], *, running: bool,
                  max_pack_force_n: float) -> DiagnosticStatus:
-    from clutch_model import kernels as K
+    from clutch_model.plant import kernels as K
 
     if not running or record is None:
         return _status(f"{name}: plant", hw, OK, "waiting for the first sample of every input",

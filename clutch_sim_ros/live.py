@@ -26,7 +26,7 @@ def node_command(namespace: str, *, sim_time: bool = True, clutch_params_file: O
                  params_file: Optional[str] = None, extra: tuple = ()) -> list[str]:
     """Command line of the node as a subprocess (``python -m clutch_sim_ros.node``, the
     module behind the console entry clutch-sim-node)."""
-    from .bags import normalize_namespace
+    from clutch_model.formats.bag_messages import normalize_namespace
 
     cmd = [sys.executable, "-m", "clutch_sim_ros.node", "--ros-args", "-r", f"__ns:={normalize_namespace(namespace) or '/'}"]
     if params_file:
@@ -81,8 +81,8 @@ def live_replay(bag_paths, namespace: str = "/clutch", out_mcap="out/live.mcap",
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
 
-    from .play import PlayError, Player
-    from .record import Recorder
+    from clutch_sim_ros.play import PlayError, Player
+    from clutch_sim_ros.record import Recorder
 
     paths = [Path(p) for p in bag_paths]
     domain = int(domain_id) if domain_id is not None else random.randint(101, 200)

@@ -54,7 +54,7 @@ of a limited-slip differential (open differential) -- while the stale slip speed
 temperature are held. In sim-time mode freshness is measured in sim time.
 
 Outputs. clutch_state carries the inputs the plant used (applied_force is 0 while the force is
-stale), the plant record of clutch_model.kernels (hydrodynamic_torque includes the drag
+stale), the plant record of clutch_model.plant.kernels (hydrodynamic_torque includes the drag
 torque of the drag_torque mechanism, so asperity + hydrodynamic = clutch_torque) and is
 stamped with the tick time (wall clock, or the /clock time in sim time).
 
@@ -91,11 +91,11 @@ from std_msgs.msg import Float64
 from std_srvs.srv import Trigger
 
 from clutch_model import Plant, load_model
-from clutch_model import kernels as K
+from clutch_model.plant import kernels as K
 
-from . import diagnostics as D
-from . import params as P
-from .validation import INPUT_TOPICS, InputChannel
+from clutch_sim_ros import diagnostics as D
+from clutch_sim_ros import params as P
+from clutch_model.plant.inputs import INPUT_TOPICS, InputChannel
 
 NODE_NAME = "clutch_sim"
 DIAGNOSTICS_PERIOD_S = 0.5

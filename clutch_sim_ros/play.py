@@ -6,7 +6,7 @@ timing, scaled by ``rate``; the node runs on its own wall-clock timer.
 
 Lock-step (``clock=True``): deterministic, as fast as the node answers. The node must run
 with use_sim_time:=true (it then steps once per /clock message). For every row of the
-offline replay grid (clutch_model.runs.read_bag: one row per valid applied_force message at or
+offline replay grid (clutch_model.formats.bag_reader.read_bag: one row per valid applied_force message at or
 after the first valid sample of every input; inputs = latest valid samples at or before
 the row) the player
 
@@ -42,7 +42,7 @@ import numpy as np
 
 from clutch_model.errors import ClutchSimError, DataError
 
-from .bags import bag_start_ns, normalize_namespace, read_messages, read_run, row_times_ns
+from clutch_model.formats.bag_messages import bag_start_ns, normalize_namespace, read_messages, read_run, row_times_ns
 
 NODE_NAME = "clutch_sim"
 
@@ -263,7 +263,7 @@ class Player:
 
     # ---- both --------------------------------------------------------------------------
     def play(self, paths, topics=None) -> PlayResult:
-        """Play the bags in log-time order (``topics``: clutch_model.runs.TopicNames of the
+        """Play the bags in log-time order (``topics``: clutch_model.formats.bag_reader.TopicNames of the
         bags' input topics, default /clutch/...)."""
         from tqdm import tqdm
 
@@ -306,7 +306,7 @@ def play(paths, namespace: str = "/clutch", *, clock: bool = False, rate: float 
     try:
         player = Player(node, executor, namespace, clock=clock, rate=rate, reset=reset, progress=progress)
         if record_out is not None:
-            from .record import Recorder
+            from clutch_sim_ros.record import Recorder
 
             log_time = (lambda: player.sim_now_ns) if clock else (lambda: time.time_ns())
             recorder = Recorder(node, record_out, namespace, log_time=log_time, overwrite=overwrite)

@@ -19,7 +19,7 @@ from typing import Callable, Optional
 
 from clutch_model.errors import DataError
 
-from .bags import normalize_namespace
+from clutch_model.formats.bag_messages import normalize_namespace
 
 RECORD_QOS_DEPTH = 1000
 
@@ -89,7 +89,7 @@ class Recorder:
                  overwrite: bool = False, topics: Optional[list] = None):
         from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-        from .bag_types import typestore
+        from clutch_model.formats.typestore import typestore
 
         qos = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST,
                          depth=RECORD_QOS_DEPTH, durability=DurabilityPolicy.VOLATILE)

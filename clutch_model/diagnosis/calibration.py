@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import math
 
-from ..identification.calibrate import calibrate_friction
-from ..identification.montecarlo import run_montecarlo
+from clutch_model.identification.calibrate import calibrate_friction
+from clutch_model.identification.montecarlo import run_montecarlo
 
 
 def car_calibration(model, fit_campaign, mc_samples: int = 200, spread: float = 0.05, seed: int = 0,

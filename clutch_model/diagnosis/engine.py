@@ -19,14 +19,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import DataError
-from ..params import ClutchModel
-from ..replay import replay_runs
-from ..runs import Campaign
-from ..simulate import SimResult
-from . import features as F
-from .fitting import CANDIDATE_IDS, CandidateFit, fit_candidate
-from .verdict import blocks, decide, score_candidates
+from clutch_model.errors import DataError
+from clutch_model.plant.params import ClutchModel
+from clutch_model.replay import replay_runs
+from clutch_model.formats.bag_reader import Campaign
+from clutch_model.plant.simulate import SimResult
+from clutch_model.diagnosis import features as F
+from clutch_model.diagnosis.fitting import CANDIDATE_IDS, CandidateFit, fit_candidate
+from clutch_model.diagnosis.verdict import blocks, decide, score_candidates
 
 JOINT_REFITS = 3
 

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..runs import Campaign
+from clutch_model.formats.bag_reader import Campaign
 
 
 def noise_sigma(residual: np.ndarray, run_start: np.ndarray) -> float:

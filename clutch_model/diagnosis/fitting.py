@@ -23,10 +23,10 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import least_squares
 
-from .. import kernels as K
-from ..mechanisms import CATALOG, delay_signal, make_mechanism
-from ..params import FRICTION_A, ClutchModel
-from ..runs import Campaign
+from clutch_model.plant import kernels as K
+from clutch_model.plant.mechanisms import CATALOG, delay_signal, make_mechanism
+from clutch_model.plant.params import FRICTION_A, ClutchModel
+from clutch_model.formats.bag_reader import Campaign
 
 N_CORR = 10
 P_CENTER_MPA = 1.0

@@ -8,9 +8,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..params import save_model
-from . import features as F
-from .engine import Diagnosis
+from clutch_model.plant.params import save_model
+from clutch_model.diagnosis import features as F
+from clutch_model.diagnosis.engine import Diagnosis
 
 
 def _finite(x):

@@ -8,7 +8,7 @@
 - ``sensitivity``   friction_sensitivity, parameter_sensitivities (§3.3), identifiable_coefficients
 - ``box``           constraint checks over the (P, theta) box, friction_positive(a, i)
 - ``evaluate``      batch RMSE of coefficient sets on a campaign (pure chunk function)
-- ``plots``         figures; ``testdata`` synthetic data with known truth
+- ``plots``         figures; synthetic data with known truth is in ``clutch_model.virtual_car``
 
 Submodules are imported on first use (``from clutch_model.identification import fit_friction``
 works) so the CLI stays quick to start.
@@ -42,7 +42,7 @@ def __getattr__(name):
 def parse_coefficients(text: str, keep_order: bool = False) -> list:
     """'a3,a4' / '3 4' / 'a0-a4' -> [3, 4] / [3, 4] / [0, 1, 2, 3, 4]; '' or 'none' -> [].
     Sorted and unique unless ``keep_order`` (then in the given order, first occurrence)."""
-    from ..errors import ParamsError
+    from clutch_model.errors import ParamsError
 
     text = (text or "").strip().lower()
     if text in ("", "none"):

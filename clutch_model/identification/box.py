@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from ..kernels import P_MAX_MPA, THETA_MAX_C
+from clutch_model.plant.kernels import P_MAX_MPA, THETA_MAX_C
 
 # the box the polynomials are constrained on (thesis §5.2.1, CONTRACT)
 P_BOX = (0.0, P_MAX_MPA)

@@ -22,10 +22,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import FitError
-from ..params import ClutchModel
-from . import box
-from .evaluate import CampaignInputs, as_campaign, param_rows, predict, rmse_of
+from clutch_model.errors import FitError
+from clutch_model.plant.params import ClutchModel
+from clutch_model.identification import box
+from clutch_model.identification.evaluate import CampaignInputs, as_campaign, param_rows, predict, rmse_of
 
 
 @dataclass
@@ -126,7 +126,7 @@ def calibrate_friction(model: ClutchModel, runs_or_campaign, coefficients="auto"
     screen = None
     notes = []
     if isinstance(coefficients, str) and coefficients == "auto":
-        from .sensitivity import identifiability_screen
+        from clutch_model.identification.sensitivity import identifiability_screen
 
         say("identifiability screen")
         screen = identifiability_screen(model, campaign, inputs=inputs, **(screen_kw or {}))

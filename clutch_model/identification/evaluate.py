@@ -8,12 +8,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .. import params as P
-from ..errors import DataError
-from ..mechanisms import apply_measurement
-from ..params import ClutchModel
-from ..runs import Campaign
-from ..simulate import simulate_batch
+from clutch_model.plant import params as P
+from clutch_model.errors import DataError
+from clutch_model.plant.mechanisms import apply_measurement
+from clutch_model.plant.params import ClutchModel
+from clutch_model.formats.bag_reader import Campaign
+from clutch_model.plant.simulate import simulate_batch
 
 A_SLICE = slice(P.FRICTION_A, P.FRICTION_A + P.N_FRICTION_COEFFS)
 

@@ -27,9 +27,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import DataError, FitError
-from ..params import ClutchModel, load_model, save_model
-from . import box
+from clutch_model.errors import DataError, FitError
+from clutch_model.plant.params import ClutchModel, load_model, save_model
+from clutch_model.identification import box
 
 P_SCALE, THETA_SCALE = box.P_BOX[1], box.THETA_BOX[1]
 BLOCK_SCALE = np.array([1.0, P_SCALE, P_SCALE ** 2, THETA_SCALE, THETA_SCALE ** 2])
@@ -95,7 +95,7 @@ class BenchArrays:
 
 
 def bench_arrays(bench) -> BenchArrays:
-    """Accepts clutch_model.bench.BenchData, a mapping or any object with the CSV columns."""
+    """Accepts clutch_model.formats.bench_csv.BenchData, a mapping or any object with the CSV columns."""
     get = (lambda k: bench[k]) if isinstance(bench, dict) else (lambda k: getattr(bench, k))
     try:
         cols = {k: np.asarray(get(k), dtype=float).ravel() for k in
@@ -175,7 +175,7 @@ class FrictionFitResult:
         path = Path(path)
         save_model(self.model, path, header=self.header())
         json_path = Path(json_path) if json_path else sidecar_path(path)
-        from . import jsonable
+        from clutch_model.identification import jsonable
 
         json_path.write_text(json.dumps(jsonable(self.to_json()), indent=2, allow_nan=False))
         return path, json_path

@@ -23,11 +23,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import FitError
-from ..params import ClutchModel, save_model
-from . import box
-from .evaluate import CampaignInputs, as_campaign, chunk_rmse, rmse_of
-from .halving import interval_halving
+from clutch_model.errors import FitError
+from clutch_model.plant.params import ClutchModel, save_model
+from clutch_model.identification import box
+from clutch_model.identification.evaluate import CampaignInputs, as_campaign, chunk_rmse, rmse_of
+from clutch_model.identification.halving import interval_halving
 
 
 def draw_samples(a_nominal, n: int, spread: float, seed: int, varied=None) -> np.ndarray:
@@ -141,12 +141,12 @@ class MonteCarloResult:
         if self.refined_model is not None:
             save_model(self.refined_model, out / "refined_model.yaml", header="\n".join(self.summary_lines()))
             written.append(out / "refined_model.yaml")
-        from . import jsonable
+        from clutch_model.identification import jsonable
 
         (out / "summary.json").write_text(json.dumps(jsonable(self.to_json()), indent=2, allow_nan=False))
         written.append(out / "summary.json")
         if plots:
-            from .plots import montecarlo_scatter
+            from clutch_model.identification.plots import montecarlo_scatter
 
             written += montecarlo_scatter(self, out, coefficients=plot_coefficients)
         return written
@@ -156,11 +156,11 @@ def _worker_warmup(threads=None):
     """Load the compiled batch kernel in a Dask worker (numba cache) before the timed work."""
     import numba
 
-    from ..simulate import simulate_batch
+    from clutch_model.plant.simulate import simulate_batch
 
     if threads:
         numba.set_num_threads(max(1, min(int(threads), numba.config.NUMBA_NUM_THREADS)))
-    from ..params import load_model
+    from clutch_model.plant.params import load_model
 
     p = load_model(None).vector()
     t = np.arange(4) * 0.005

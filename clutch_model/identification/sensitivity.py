@@ -25,11 +25,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .. import params as P
-from ..params import ClutchModel
-from ..simulate import simulate, simulate_batch
-from . import box
-from .evaluate import CampaignInputs, as_campaign, param_rows, predict
+from clutch_model.plant import params as P
+from clutch_model.plant.params import ClutchModel
+from clutch_model.plant.simulate import simulate, simulate_batch
+from clutch_model.identification import box
+from clutch_model.identification.evaluate import CampaignInputs, as_campaign, param_rows, predict
 
 _DEGREE = (0, 1, 2, 1, 2)   # of the monomials 1, P, P^2, theta, theta^2
 

@@ -27,8 +27,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import DataError, FitError
-from ..params import ClutchModel
+from clutch_model.errors import DataError, FitError
+from clutch_model.plant.params import ClutchModel
 
 B_NAMES = ("b1", "b2", "b3", "b4")
 B_UNITS = ("W/m^2/K", "W/m^2/K per rad/s", "W/m^2/K per kN", "W/m^2/K per rad/s/kN")
@@ -325,7 +325,7 @@ def with_thermal(model: ClutchModel, b=None, alpha0=None, alpha1=None) -> Clutch
 
 def pack_temperature_rmse(model: ClutchModel, runs) -> float:
     """Replay the runs and compare the simulated pack temperature with the measured one."""
-    from ..replay import replay_runs
+    from clutch_model.replay import replay_runs
 
     runs = [r for r in runs if r.pack_temperature_measured_c is not None]
     if not runs:

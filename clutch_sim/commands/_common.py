@@ -3,7 +3,7 @@ from __future__ import annotations
 
 
 def add_topic_options(parser) -> None:
-    from clutch_model.runs import TopicNames
+    from clutch_model.formats.bag_reader import TopicNames
 
     d = TopicNames()
     g = parser.add_argument_group("bag topics")
@@ -15,12 +15,12 @@ def add_topic_options(parser) -> None:
 
 
 def topics_from_args(args):
-    from clutch_model.runs import TopicNames
+    from clutch_model.formats.bag_reader import TopicNames
 
     return TopicNames(args.topic_force, args.topic_slip, args.topic_sump, args.topic_torque, args.topic_pack)
 
 
 def load_runs(args, bags):
-    from clutch_model.runs import read_bags
+    from clutch_model.formats.bag_reader import read_bags
 
     return read_bags(bags, topics_from_args(args), progress=True)

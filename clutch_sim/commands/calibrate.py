@@ -1,8 +1,8 @@
 """clutch-sim calibrate: refine the friction coefficients on car-test bags (least squares)."""
 from __future__ import annotations
 
-from ..cli import add_params_option
-from ._common import add_topic_options, load_runs
+from clutch_sim.cli import add_params_option
+from clutch_sim.commands._common import add_topic_options, load_runs
 
 
 def add_parser(sub):
@@ -38,8 +38,8 @@ def run(args) -> int:
     from clutch_model.identification.evaluate import CampaignInputs, rmse_of
     from clutch_model.identification import jsonable
     from clutch_model.identification.friction_fit import sidecar_path
-    from clutch_model.params import load_model, save_model
-    from clutch_model.runs import Campaign
+    from clutch_model.plant.params import load_model, save_model
+    from clutch_model.formats.bag_reader import Campaign
 
     if args.regularization < 0 or args.max_iterations < 1:
         raise ParamsError("--regularization must be >= 0 and --max-iterations >= 1")

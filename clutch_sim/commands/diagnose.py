@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import sys
 
-from ..cli import add_params_option
-from ._common import add_topic_options, load_runs
+from clutch_sim.cli import add_params_option
+from clutch_sim.commands._common import add_topic_options, load_runs
 
 
 def add_parser(sub):
@@ -31,14 +31,14 @@ def add_parser(sub):
 
 
 def run(args) -> int:
-    from clutch_model.bench import read_bench
+    from clutch_model.formats.bench_csv import read_bench
     from clutch_model.diagnosis.calibration import car_calibration
     from clutch_model.diagnosis.engine import choose_held_out, diagnose_campaign
     from clutch_model.diagnosis.report import write_report
     from clutch_model.errors import ParamsError
     from clutch_model.identification.friction_fit import fit_friction
-    from clutch_model.mechanisms import CATALOG
-    from clutch_model.params import load_model
+    from clutch_model.plant.mechanisms import CATALOG
+    from clutch_model.plant.params import load_model
 
     if args.candidates:
         bad = [c for c in args.candidates if c not in CATALOG]

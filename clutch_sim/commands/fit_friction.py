@@ -1,7 +1,7 @@
 """clutch-sim fit-friction: constrained friction fit on SAE#2 bench data (thesis §5.2.1)."""
 from __future__ import annotations
 
-from ..cli import add_params_option
+from clutch_sim.cli import add_params_option
 
 
 def add_parser(sub):
@@ -27,10 +27,10 @@ def add_parser(sub):
 
 
 def run(args) -> int:
-    from clutch_model.bench import read_bench
+    from clutch_model.formats.bench_csv import read_bench
     from clutch_model.errors import ParamsError
     from clutch_model.identification.friction_fit import fit_friction
-    from clutch_model.params import load_model
+    from clutch_model.plant.params import load_model
 
     if args.starts < 0:
         raise ParamsError("--starts must be >= 0")

@@ -1,8 +1,8 @@
 """clutch-sim fit-thermal: viscosity (eq. 3.17) and heat-transfer (eq. 5.11-5.14) fits."""
 from __future__ import annotations
 
-from ..cli import add_params_option
-from ._common import add_topic_options, load_runs
+from clutch_sim.cli import add_params_option
+from clutch_sim.commands._common import add_topic_options, load_runs
 
 
 def add_parser(sub):
@@ -36,7 +36,7 @@ def run(args) -> int:
     from clutch_model.identification.friction_fit import sidecar_path
     from clutch_model.identification.thermal_fit import (fit_heat_transfer, fit_viscosity, read_viscosity_csv,
                                                          with_thermal)
-    from clutch_model.params import load_model, save_model
+    from clutch_model.plant.params import load_model, save_model
 
     if not args.bags and not args.viscosity:
         raise ParamsError("give --bags (heat transfer) and/or --viscosity CSV")

@@ -1,8 +1,8 @@
 """clutch-sim montecarlo: Monte Carlo refit of the friction coefficients (thesis §5.3, §6.2.2)."""
 from __future__ import annotations
 
-from ..cli import add_params_option
-from ._common import add_topic_options, load_runs
+from clutch_sim.cli import add_params_option
+from clutch_sim.commands._common import add_topic_options, load_runs
 
 
 def add_parser(sub):
@@ -41,8 +41,8 @@ def run(args) -> int:
     from clutch_model.identification import parse_coefficients
     from clutch_model.identification.evaluate import CampaignInputs
     from clutch_model.identification.montecarlo import run_montecarlo
-    from clutch_model.params import load_model
-    from clutch_model.runs import Campaign
+    from clutch_model.plant.params import load_model
+    from clutch_model.formats.bag_reader import Campaign
 
     if args.samples < 1:
         raise ParamsError("--samples must be >= 1")

@@ -4,8 +4,8 @@ from __future__ import annotations
 import math
 import sys
 
-from ..cli import add_params_option
-from ._common import add_topic_options, topics_from_args
+from clutch_sim.cli import add_params_option
+from clutch_sim.commands._common import add_topic_options, topics_from_args
 
 
 def add_parser(sub):

@@ -4,7 +4,7 @@ from __future__ import annotations
 import math
 import sys
 
-from ..cli import add_params_option
+from clutch_sim.cli import add_params_option
 
 
 def add_parser(sub):

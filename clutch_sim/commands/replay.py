@@ -4,8 +4,8 @@ from __future__ import annotations
 import math
 import sys
 
-from ..cli import add_params_option
-from ._common import add_topic_options, load_runs
+from clutch_sim.cli import add_params_option
+from clutch_sim.commands._common import add_topic_options, load_runs
 
 
 def add_parser(sub):
@@ -22,7 +22,7 @@ def add_parser(sub):
 
 
 def run(args) -> int:
-    from clutch_model.params import load_model
+    from clutch_model.plant.params import load_model
     from clutch_model.replay import replay_runs, write_replay_csv
 
     model = load_model(args.params)

@@ -1,8 +1,8 @@
 """clutch-sim sensitivity: torque sensitivity to mu_f (thesis §3.3) and to every parameter."""
 from __future__ import annotations
 
-from ..cli import add_params_option
-from ._common import add_topic_options, load_runs
+from clutch_sim.cli import add_params_option
+from clutch_sim.commands._common import add_topic_options, load_runs
 
 
 def add_parser(sub):
@@ -39,7 +39,7 @@ def run(args) -> int:
     from clutch_model.identification import plots
     from clutch_model.identification.sensitivity import (ThesisScenario, friction_sensitivity,
                                                          identifiability_screen, parameter_sensitivities)
-    from clutch_model.params import load_model
+    from clutch_model.plant.params import load_model
 
     if args.duration <= 0 or args.rate <= 0:
         raise ParamsError("--duration and --rate must be > 0")

@@ -7,7 +7,7 @@
 
 Writes DIR/bench.csv, DIR/bags/run_00 ... (one rosbag2 bag per run), DIR/truth.yaml (the
 true model, for tests; diagnose never reads it) and DIR/campaign.json (schedule and truth
-metadata). Magnitudes: see clutch_model.synth (module docstring).
+metadata). Magnitudes: see clutch_model.virtual_car.campaign (module docstring).
 """
 from __future__ import annotations
 
@@ -56,8 +56,8 @@ def run(args) -> int:
     import sys
 
     from clutch_model.errors import ParamsError
-    from clutch_model.params import load_model
-    from clutch_model.synth import (CampaignSpec, check_output_dir, run_names,
+    from clutch_model.plant.params import load_model
+    from clutch_model.virtual_car.campaign import (CampaignSpec, check_output_dir, run_names,
                                     synthesize_campaign, write_campaign)
 
     if args.magnitude is not None and not (args.mechanism or args.extra_effect):

@@ -13,7 +13,7 @@ import os
 import numpy as np
 import pytest
 
-from clutch_model.synth import VISIBLE_RANGE, CampaignSpec, synthesize_campaign, write_campaign
+from clutch_model.virtual_car.campaign import VISIBLE_RANGE, CampaignSpec, synthesize_campaign, write_campaign
 from clutch_sim.cli import main as cli
 
 HIDDEN_SEED = int(os.environ.get("CLUTCH_HIDDEN_SEED", "20261123"))

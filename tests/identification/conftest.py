@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from clutch_model import load_model
-from clutch_model.identification import testdata as td
+from clutch_model.virtual_car import identification_data as td
 
 NOISE_NM = 15.0
 # friction perturbation of the "true" car clutch against RC-1 (the bench fit)

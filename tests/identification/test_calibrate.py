@@ -37,7 +37,7 @@ def test_calibration_reaches_noise_floor_on_held_out_runs(rc1, car_runs):
 
 def test_explicit_coefficients_and_rows(rc1, car_runs):
     fit_runs, _ = car_runs
-    from clutch_model.runs import Campaign
+    from clutch_model.formats.bag_reader import Campaign
 
     camp = Campaign(list(fit_runs))
     rows = camp.run_index < 3

@@ -3,9 +3,9 @@ import json
 import numpy as np
 import pytest
 
-from clutch_model.bench import write_bench
-from clutch_model.identification import testdata as td
-from clutch_model.params import load_model
+from clutch_model.formats.bench_csv import write_bench
+from clutch_model.virtual_car import identification_data as td
+from clutch_model.plant.params import load_model
 from clutch_sim.cli import main
 
 

@@ -4,9 +4,10 @@ import numpy as np
 import pytest
 
 from clutch_model.errors import FitError
-from clutch_model.identification import box, friction_fit as ff, testdata as td
-from clutch_model.kernels import friction_grid
-from clutch_model.params import load_model
+from clutch_model.identification import box, friction_fit as ff
+from clutch_model.virtual_car import identification_data as td
+from clutch_model.plant.kernels import friction_grid
+from clutch_model.plant.params import load_model
 
 
 def _grid_extrema(a):

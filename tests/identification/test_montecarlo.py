@@ -5,7 +5,7 @@ from clutch_model.identification import box
 from clutch_model.identification.evaluate import CampaignInputs, rmse_of
 from clutch_model.identification.halving import interval_halving
 from clutch_model.identification.montecarlo import chunk_indices, draw_samples, run_montecarlo
-from clutch_model.params import load_model
+from clutch_model.plant.params import load_model
 
 from .conftest import NOISE_NM
 

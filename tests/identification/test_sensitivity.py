@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from clutch_model.identification import sensitivity as se
-from clutch_model.kernels import friction_grid
+from clutch_model.plant.kernels import friction_grid
 
 
 def test_scale_friction_scales_mu_exactly(rc1):

@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from clutch_model.errors import DataError, FitError
-from clutch_model.identification import testdata as td
+from clutch_model.virtual_car import identification_data as td
 from clutch_model.identification import thermal_fit as tf
 
 

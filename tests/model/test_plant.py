@@ -11,8 +11,8 @@ from hypothesis import given, settings, strategies as st
 from scipy.optimize import brentq
 
 from clutch_model import Plant, load_model, simulate, simulate_batch
-from clutch_model import kernels as K
-from clutch_model.params import REFERENCE_CLUTCH
+from clutch_model.plant import kernels as K
+from clutch_model.plant.params import REFERENCE_CLUTCH
 
 from .reference_plant import ReferencePlant
 

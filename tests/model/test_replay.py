@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from clutch_model import load_model, make_mechanism, simulate
-from clutch_model.bagwriter import write_run_bag
-from clutch_model.runs import read_bag
+from clutch_model.formats.bag_writer import write_run_bag
+from clutch_model.formats.bag_reader import read_bag
 from clutch_sim.cli import main as cli
 
 MODEL = load_model()

@@ -237,7 +237,7 @@ def write_test_bag(path: Path, seconds: float = 2.0, seed: int = 0, start_ns=Non
     torque at 100 Hz, on unaligned time grids."""
     import numpy as np
 
-    from clutch_model.bagwriter import write_run_bag
+    from clutch_model.formats.bag_writer import write_run_bag
 
     rng = np.random.default_rng(seed)
     tf = np.arange(0.0, seconds, 0.01)

@@ -1,5 +1,5 @@
 """Sim-time lock-step: the node driven by /clock gives the offline simulator's numbers
-(clutch_model.simulate / clutch_model.replay.replay_runs) to numerical precision; and
+(clutch_model.plant.simulate / clutch_model.replay.replay_runs) to numerical precision; and
 ``clutch-sim play --clock --record`` + ``live_replay`` reproduce offline replay of bags."""
 from __future__ import annotations
 
@@ -105,7 +105,7 @@ def test_play_clock_and_record_equal_offline_replay(domain_id, tmp_path):
     one with invalid samples), bag after bag."""
     from clutch_model import load_model
     from clutch_model.replay import replay_runs
-    from clutch_model.runs import read_bags
+    from clutch_model.formats.bag_reader import read_bags
 
     bags = [write_test_bag(tmp_path / "run_01", 1.5, seed=0, start_ns=T0, bad_samples=True),
             write_test_bag(tmp_path / "run_02", 1.0, seed=1, start_ns=T0 + 60_000_000_000, storage="sqlite3"),
@@ -144,7 +144,7 @@ def test_play_clock_and_record_equal_offline_replay(domain_id, tmp_path):
 def test_live_replay_returns_offline_rmse(domain_id, tmp_path):
     from clutch_model import load_model
     from clutch_model.replay import replay_runs
-    from clutch_model.runs import read_bags
+    from clutch_model.formats.bag_reader import read_bags
     from clutch_sim_ros.live import live_replay
 
     bags = [write_test_bag(tmp_path / "run_a", 1.0, seed=3, start_ns=T0),

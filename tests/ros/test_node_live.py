@@ -327,7 +327,7 @@ def test_realtime_play_and_record(io1, domain_id, tmp_path):
                   for c, _, raw in reader.messages([c for c in reader.connections if c.topic == "/rig1/clutch_state"])]
     assert topics["/rig1/clutch_state"] > 500 and topics["/rig1/clutch_torque"] > 500
     assert topics["/diagnostics"] >= 1
-    from clutch_sim_ros.bags import read_messages
+    from clutch_model.formats.bag_messages import read_messages
 
     bag_forces = {m.value for m in read_messages(bag).messages if m.topic == "applied_force"}
     played = set(forces) & bag_forces

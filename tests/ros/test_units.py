@@ -14,7 +14,7 @@ pytestmark = pytest.mark.ros
 
 
 def test_input_validity_rules():
-    from clutch_sim_ros.validation import valid_force, valid_slip, valid_sump
+    from clutch_model.plant.inputs import valid_force, valid_slip, valid_sump
 
     assert valid_force(0.0) and valid_force(-500.0) and valid_force(1e6)
     assert not any(valid_force(x) for x in (math.nan, math.inf, -math.inf, 1e6 + 1))
@@ -25,7 +25,7 @@ def test_input_validity_rules():
 
 
 def test_input_channel_holds_last_good_value_and_goes_stale():
-    from clutch_sim_ros.validation import InputChannel
+    from clutch_model.plant.inputs import InputChannel
 
     ch = InputChannel("applied_force")
     assert ch.value is None and ch.is_stale(0, 0.1)
@@ -58,7 +58,7 @@ def test_diagnostics_levels():
     from diagnostic_msgs.msg import DiagnosticStatus as S
 
     from clutch_sim_ros import diagnostics as D
-    from clutch_sim_ros.validation import InputChannel
+    from clutch_model.plant.inputs import InputChannel
 
     chans = [InputChannel(n) for n in ("applied_force", "slip_speed", "sump_temperature")]
     st = D.inputs_status("/n", "/n", chans, 0, 0.1, {})
@@ -82,7 +82,7 @@ def test_diagnostics_levels():
 
 
 def test_typestore_hash_matches_compiled_interface():
-    from clutch_sim_ros.bag_types import CLUTCH_STATE, typestore
+    from clutch_model.formats.typestore import CLUTCH_STATE, typestore
 
     ts = typestore()
     share = Path(sys.prefix) / "share" / "clutch_msgs" / "msg" / "ClutchState.json"
@@ -102,7 +102,7 @@ def test_rclpy_cdr_decodes_with_typestore_and_mcap_roundtrip(tmp_path):
     from clutch_msgs.msg import ClutchState
     from rclpy.serialization import serialize_message
 
-    from clutch_sim_ros.bag_types import typestore
+    from clutch_model.formats.typestore import typestore
     from clutch_sim_ros.record import McapOut
 
     msg = ClutchState(applied_force=1234.5, pack_force=1200.0, slip_speed=-3.25, sump_temperature=61.0,
@@ -137,7 +137,7 @@ def test_rclpy_cdr_decodes_with_typestore_and_mcap_roundtrip(tmp_path):
 
 
 def test_bag_reading_for_play(tmp_path):
-    from clutch_sim_ros.bags import read_messages, read_run, row_times_ns
+    from clutch_model.formats.bag_messages import read_messages, read_run, row_times_ns
 
     from .conftest import write_test_bag
 

@@ -5,7 +5,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from clutch_model.bagwriter import DEFAULT_TOPICS, RunSignals, TopicSeries, write_run_bag
+from clutch_model.formats.bag_writer import DEFAULT_TOPICS, RunSignals, TopicSeries, write_run_bag
 from clutch_model.errors import DataError
 
 START = 1_700_000_000_123_000_000

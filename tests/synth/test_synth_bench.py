@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from clutch_model.bench import BENCH_COLUMNS, BenchData, read_bench, write_bench
+from clutch_model.formats.bench_csv import BENCH_COLUMNS, BenchData, read_bench, write_bench
 from clutch_model.errors import DataError
 
 HEADER = ",".join(BENCH_COLUMNS)

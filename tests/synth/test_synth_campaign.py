@@ -5,9 +5,9 @@ import json
 import numpy as np
 import pytest
 
-from clutch_model import kernels as K
-from clutch_model.params import load_model
-from clutch_model.synth import (CATALOG, DEFAULT_MAGNITUDE, MECHANISM_PARAMETER, CampaignSpec,
+from clutch_model.plant import kernels as K
+from clutch_model.plant.params import load_model
+from clutch_model.virtual_car.campaign import (CATALOG, DEFAULT_MAGNITUDE, MECHANISM_PARAMETER, CampaignSpec,
                                 _trajectory_pt_cross, friction_is_positive, synthesize_campaign,
                                 write_campaign)
 from clutch_model.errors import DataError, ParamsError
@@ -312,7 +312,7 @@ def test_replay_of_truth_reaches_noise_floor(tmp_path):
     """Written bags + the lead's bag reader and replay: the true model (with its mechanism)
     explains the measured torque down to the sensor noise; the twin without it does not."""
     from clutch_model.replay import replay_runs
-    from clutch_model.runs import read_bags
+    from clutch_model.formats.bag_reader import read_bags
 
     r = synthesize_campaign(CampaignSpec(seed=11, n_runs=3, mechanism="transport_delay", magnitude=0.05))
     paths = write_campaign(r, tmp_path)

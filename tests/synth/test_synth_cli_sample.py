@@ -1,14 +1,14 @@
-"""`clutch-sim synth` and the shipped sample data (python -m clutch_model.sample_data)."""
+"""`clutch-sim synth` and the shipped sample data (python -m clutch_model.virtual_car.sample_bags)."""
 import filecmp
 import json
 
 import numpy as np
 import pytest
 
-from clutch_model.mechanisms import CATALOG
-from clutch_model.params import load_model
-from clutch_model.sample_data import SAMPLE_DIR, write_sample_data
-from clutch_model.synth import EXTRA_EFFECTS
+from clutch_model.plant.mechanisms import CATALOG
+from clutch_model.plant.params import load_model
+from clutch_model.virtual_car.sample_bags import SAMPLE_DIR, write_sample_data
+from clutch_model.virtual_car.campaign import EXTRA_EFFECTS
 from clutch_sim.cli import main
 from clutch_sim.commands import synth as synth_cmd
 
@@ -77,7 +77,7 @@ def test_sample_data_deterministic(tmp_path):
 def test_shipped_sample_bags_readable():
     from rosbags.highlevel import AnyReader
 
-    from clutch_model.bench import read_bench
+    from clutch_model.formats.bench_csv import read_bench
 
     assert len(read_bench(SAMPLE_DIR / "bench.csv")) == 135
     starts = []

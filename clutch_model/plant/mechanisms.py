@@ -11,8 +11,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import params as P
-from .errors import ParamsError
+from clutch_model.plant import params as P
+from clutch_model.errors import ParamsError
 
 
 @dataclass

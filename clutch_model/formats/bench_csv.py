@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import DataError
+from clutch_model.errors import DataError
 
 BENCH_COLUMNS = ("slip_speed_rad_s", "pressure_mpa", "plate_temperature_c",
                  "sump_temperature_c", "friction_coefficient")

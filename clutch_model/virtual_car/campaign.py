@@ -24,7 +24,7 @@ Test schedule (thesis §5.1, "validation dataset")
     time grid from the run's start; sump (and optionally pack) temperature at
     ``temperature_rate_hz`` (10 Hz) from the same start.
 
-Plant: ``clutch_model.simulate`` over the whole campaign from the TRUE inputs at the force
+Plant: ``clutch_model.plant.simulate`` over the whole campaign from the TRUE inputs at the force
 rate (runs concatenated, ``run_start`` at each run's first row, so friction_degradation's
 energy carries across runs in time order). Sensor torque =
 ``predict_measured_torque(true model, ...)`` (torque_offset, transport_delay), then the
@@ -92,13 +92,13 @@ from pathlib import Path
 import numpy as np
 from numba import njit
 
-from . import kernels as K
-from . import params as P
-from .bagwriter import DEFAULT_START_TIME_NS, RunSignals, TopicSeries
-from .bench import BenchData
-from .errors import DataError, ParamsError
-from .mechanisms import CATALOG, make_mechanism
-from .params import ClutchModel, load_model
+from clutch_model.plant import kernels as K
+from clutch_model.plant import params as P
+from clutch_model.formats.bag_writer import DEFAULT_START_TIME_NS, RunSignals, TopicSeries
+from clutch_model.formats.bench_csv import BenchData
+from clutch_model.errors import DataError, ParamsError
+from clutch_model.plant.mechanisms import CATALOG, make_mechanism
+from clutch_model.plant.params import ClutchModel, load_model
 
 MECHANISM_PARAMETER = {
     "actuator_lag": "tau_s",
@@ -410,7 +410,7 @@ def _trajectory_pt_cross(p, t, force, slip, sump, run_start, coeff):
 
 def _simulate_truth(model: ClutchModel, t, force, slip, sump, run_start, spec: CampaignSpec,
                     extra_magnitude):
-    from .simulate import simulate
+    from clutch_model.plant.simulate import simulate
 
     if spec.extra_effect == "pressure_temperature_cross":
         if model.mechanism("friction_degradation") is not None:
@@ -461,7 +461,7 @@ def _with_mechanism(model: ClutchModel, mech_id: str, value: float) -> ClutchMod
 def synthesize_campaign(spec: CampaignSpec | None = None, base_model: ClutchModel | None = None,
                         progress=None) -> CampaignResult:
     """Generate a campaign (see the module docstring). ``progress``: optional callable(str)."""
-    from .simulate import predict_measured_torque
+    from clutch_model.plant.simulate import predict_measured_torque
 
     spec = spec or CampaignSpec()
     spec.validate()
@@ -569,7 +569,7 @@ def synthesize_campaign(spec: CampaignSpec | None = None, base_model: ClutchMode
 
     e_total = float(np.sum(e_runs))
     meta = {
-        "generator": "clutch_model.synth",
+        "generator": "clutch_model.virtual_car.campaign",
         "expected_cause": spec.expected_cause,
         "seed": int(spec.seed),
         "base_model": str(base.source),
@@ -645,9 +645,9 @@ def write_campaign(result: CampaignResult, out_dir, storage: str = "mcap", compr
     ``out_dir/truth.yaml`` (the true model in the parameter-file schema, mechanisms included)
     and ``out_dir/campaign.json`` (the schedule, noise and truth metadata, incl.
     ``expected_cause`` and any extra effect). Returns the paths."""
-    from .bagwriter import write_run_bag
-    from .bench import write_bench
-    from .params import save_model
+    from clutch_model.formats.bag_writer import write_run_bag
+    from clutch_model.formats.bench_csv import write_bench
+    from clutch_model.plant.params import save_model
 
     out_dir = Path(out_dir)
     bag_root = out_dir / "bags"
@@ -657,7 +657,7 @@ def write_campaign(result: CampaignResult, out_dir, storage: str = "mcap", compr
              "metadata": out_dir / "campaign.json", "bags": []}
     write_bench(paths["bench"], result.bench)
     spec = result.spec
-    hdr = (f"TRUE clutch of a synthetic campaign (clutch_model.synth, seed {spec.seed}).\n"
+    hdr = (f"TRUE clutch of a synthetic campaign (clutch_model.virtual_car.campaign, seed {spec.seed}).\n"
            f"expected diagnosis: {spec.expected_cause}"
            + (f" ({result.metadata['extra_effect']['name']}: not representable in this file)"
               if spec.extra_effect else "")

@@ -37,7 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import DataError
+from clutch_model.errors import DataError
 
 DEFAULT_TOPICS = {
     "applied_force": "/clutch/applied_force",

@@ -1,6 +1,6 @@
 """Input validity (CONTRACT.md "Input validity") and the held-input channels of the node.
 
-Pure Python, no rclpy. The limits are clutch_model.runs' (offline replay drops the samples
+Pure Python, no rclpy. The limits are clutch_model.formats.bag_reader' (offline replay drops the samples
 the node rejects), so the node and offline replay see the same inputs.
 """
 from __future__ import annotations
@@ -8,7 +8,7 @@ from __future__ import annotations
 import math
 from typing import Callable, Optional
 
-from clutch_model.runs import FORCE_MAX_N, SLIP_MAX_RAD_S, SUMP_RANGE_C
+from clutch_model.formats.bag_reader import FORCE_MAX_N, SLIP_MAX_RAD_S, SUMP_RANGE_C
 
 # FORCE_MAX_N: applied force above it is rejected (a negative force is valid: counts as 0)
 # SLIP_MAX_RAD_S: |slip| above it is rejected

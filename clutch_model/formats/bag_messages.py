@@ -2,7 +2,7 @@
 
 - ``read_messages``: every input message of a bag in log-time order, unchanged (real-time
   play republishes them as recorded, invalid ones included: the node rejects those).
-- ``read_run``: the bag on the replay grid of CONTRACT.md, via ``clutch_model.runs.read_bag``
+- ``read_run``: the bag on the replay grid of CONTRACT.md, via ``clutch_model.formats.bag_reader.read_bag``
   (the grid offline replay uses, invalid samples dropped): lock-step play publishes exactly
   these rows, so the live outputs equal offline replay.
 """
@@ -43,7 +43,7 @@ class BagMessages:
 
 
 def bag_name(path) -> str:
-    from clutch_model.runs import bag_name as _name
+    from clutch_model.formats.bag_reader import bag_name as _name
 
     return _name(Path(path))
 
@@ -64,17 +64,17 @@ def bag_start_ns(path) -> int:
 
 
 def default_topics():
-    from clutch_model.runs import TopicNames
+    from clutch_model.formats.bag_reader import TopicNames
 
     return TopicNames()
 
 
 def read_messages(path, topics=None) -> BagMessages:
     """The input messages of one bag (rosbag2 MCAP/sqlite3 directory or bare .mcap);
-    ``topics``: clutch_model.runs.TopicNames (default /clutch/...)."""
+    ``topics``: clutch_model.formats.bag_reader.TopicNames (default /clutch/...)."""
     from rosbags.highlevel import AnyReader
 
-    from .bag_types import typestore
+    from clutch_model.formats.typestore import typestore
 
     path = Path(path)
     if not path.exists():
@@ -107,8 +107,8 @@ def read_messages(path, topics=None) -> BagMessages:
 
 
 def read_run(path, topics=None):
-    """The bag on the offline replay grid (clutch_model.runs.Run)."""
-    from clutch_model.runs import read_bag
+    """The bag on the offline replay grid (clutch_model.formats.bag_reader.Run)."""
+    from clutch_model.formats.bag_reader import read_bag
 
     return read_bag(Path(path), topics or default_topics())
 

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import DataError
+from clutch_model.errors import DataError
 
 FORCE_MAX_N = 1e6
 SLIP_MAX_RAD_S = 1000.0

@@ -16,7 +16,7 @@ from rosbags.typesys.store import Typestore
 from clutch_model.errors import DataError
 
 CLUTCH_STATE = "clutch_msgs/msg/ClutchState"
-_REPO_MSG = Path(__file__).resolve().parents[1] / "msg_defs" / "clutch_msgs" / "msg" / "ClutchState.msg"
+_REPO_MSG = Path(__file__).resolve().parents[2] / "msg_defs" / "clutch_msgs" / "msg" / "ClutchState.msg"
 _INSTALLED_MSG = Path(sys.prefix) / "share" / "clutch_msgs" / "msg" / "ClutchState.msg"
 
 

@@ -1,16 +1,16 @@
 """Synthetic data with known truth for parameter-recovery tests and benchmarks: SAE#2-style
 bench rows from known friction coefficients, car-test runs simulated with a known model,
-viscosity samples. (The full virtual test car with faults is clutch_model.synth.)
+viscosity samples. (The full virtual test car with faults is clutch_model.virtual_car.campaign.)
 """
 from __future__ import annotations
 
 import numpy as np
 
-from ..kernels import friction_grid
-from ..params import ClutchModel
-from ..runs import Campaign, Run
-from ..simulate import predict_measured_torque, simulate
-from ..bench import BenchData
+from clutch_model.plant.kernels import friction_grid
+from clutch_model.plant.params import ClutchModel
+from clutch_model.formats.bag_reader import Campaign, Run
+from clutch_model.plant.simulate import predict_measured_torque, simulate
+from clutch_model.formats.bench_csv import BenchData
 
 BENCH_SLIPS = (0.0005, 0.002, 0.005, 0.01, 0.02, 0.035, 0.06, 0.1, 0.2, 0.4, 0.8, 1.5, 3.0, 6.0, 12.0, 25.0)
 BENCH_PRESSURES = (0.5, 1.0, 2.0, 3.5, 5.0, 7.5, 10.0, 13.0, 16.5, 20.0)
@@ -101,7 +101,7 @@ def write_runs_as_bags(runs, outdir, storage: str = "mcap") -> list:
     log-time order; returns the bag paths."""
     from pathlib import Path
 
-    from ..bagwriter import DEFAULT_START_TIME_NS, write_run_bag
+    from clutch_model.formats.bag_writer import DEFAULT_START_TIME_NS, write_run_bag
 
     out = Path(outdir)
     out.mkdir(parents=True, exist_ok=True)

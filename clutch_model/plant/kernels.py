@@ -22,7 +22,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from . import params as P
+from clutch_model.plant import params as P
 
 N_STATE = 7
 S_H, S_THETA, S_FHYST, S_FPACK, S_ENERGY, S_SIGN, S_POWER = range(7)

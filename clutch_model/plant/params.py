@@ -15,9 +15,9 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from .errors import ParamsError
+from clutch_model.errors import ParamsError
 
-REFERENCE_CLUTCH = Path(__file__).resolve().parents[1] / "config" / "reference_clutch.yaml"
+REFERENCE_CLUTCH = Path(__file__).resolve().parents[2] / "config" / "reference_clutch.yaml"
 
 # --- layout of the kernel parameter vector -------------------------------------------
 R_OUTER, R_INNER, N_FRICTION, N_SEPARATOR, A_RED = 0, 1, 2, 3, 4
@@ -57,7 +57,7 @@ class ClutchModel:
     # -- construction ------------------------------------------------------------------
     @classmethod
     def from_dict(cls, raw: dict, source: str = "<memory>") -> "ClutchModel":
-        from .mechanisms import mechanism_from_dict
+        from clutch_model.plant.mechanisms import mechanism_from_dict
 
         if not isinstance(raw, dict):
             raise ParamsError(f"{source}: not a mapping of parameter sections")

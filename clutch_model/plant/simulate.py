@@ -5,7 +5,7 @@ plain arrays in, a result object out.
 - ``simulate_batch``: many parameter sets on the same inputs (Monte Carlo), in parallel.
 - ``Plant``: the real-time step simulator the ROS node drives (state in, inputs held over
   dt, state out).
-All three run the same kernel functions (clutch_model.kernels).
+All three run the same kernel functions (clutch_model.plant.kernels).
 """
 from __future__ import annotations
 
@@ -13,9 +13,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import kernels as K
-from .mechanisms import apply_measurement
-from .params import ClutchModel
+from clutch_model.plant import kernels as K
+from clutch_model.plant.mechanisms import apply_measurement
+from clutch_model.plant.params import ClutchModel
 
 
 @dataclass

@@ -1,0 +1,1 @@
+"""File formats: car-test bags (read, write, typestore), bench CSV."""

@@ -1,0 +1,1 @@
+"""The virtual test car: seeded synthetic campaigns, bench tables and the sample bags."""
