@@ -22,7 +22,9 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from clutch_model.plant import params as P
+from clutch_model.plant import friction
+from clutch_model.plant import layout as P
+from clutch_model.plant.friction import P_MAX_MPA, THETA_MAX_C
 
 N_STATE = 7
 S_H, S_THETA, S_FHYST, S_FPACK, S_ENERGY, S_SIGN, S_POWER = range(7)
@@ -42,7 +44,6 @@ MAX_STEP_S = 0.0051       # longer steps are split (inputs held): 200 Hz rows ar
 MAX_SUBSTEPS = 400
 INV_SQRT_2PI = 1.0 / math.sqrt(2.0 * math.pi)
 SQRT2 = math.sqrt(2.0)
-P_MAX_MPA, THETA_MAX_C = 20.0, 230.0
 SLIP_LIMIT = 1.0e4        # |slip| clamp inside the model (the node rejects > 1000)
 SUMP_MIN, SUMP_MAX = -100.0, 500.0
 H_MAX = 1.0e-2            # film cap [m]: far beyond any open-clutch gap
@@ -86,21 +87,9 @@ def viscosity(theta, p):
 
 @njit(cache=True)
 def friction_coefficient(w_abs, pressure_mpa, theta, p):
-    """Stribeck mu_f(w, P, theta), eq. 4.9-4.14 with constant i (table 6.3 order)."""
-    pr = min(max(pressure_mpa, 0.0), P_MAX_MPA)
-    th = min(max(theta, 0.0), THETA_MAX_C)
-    a = P.FRICTION_A
-    pr2, th2 = pr * pr, th * th
-    mu_c = p[a] + p[a + 1] * pr + p[a + 2] * pr2 + p[a + 3] * th + p[a + 4] * th2
-    mu_s = p[a + 5] + p[a + 6] * pr + p[a + 7] * pr2 + p[a + 8] * th + p[a + 9] * th2
-    w_s = p[a + 10] + p[a + 11] * pr + p[a + 12] * pr2 + p[a + 13] * th + p[a + 14] * th2
-    k_v = p[a + 15] + p[a + 16] * pr + p[a + 17] * pr2 + p[a + 18] * th + p[a + 19] * th2
-    if w_s < 1e-6:
-        w_s = 1e-6
-    r = w_abs / w_s
-    e = math.exp(-(r ** p[P.FRICTION_I])) if r < 1e6 else 0.0
-    mu = mu_c + (mu_s - mu_c) * e + k_v * w_abs
-    return mu if mu > 0.0 else 0.0
+    """Stribeck mu_f(w, P, theta) of the parameter vector (clutch_model.plant.friction)."""
+    return friction.mu(p[P.FRICTION_A:P.FRICTION_A + P.N_FRICTION_COEFFS], p[P.FRICTION_I],
+                       w_abs, pressure_mpa, theta)
 
 
 @njit(cache=True)
@@ -377,12 +366,3 @@ def run_batch(pmat, t, force, slip, sump, run_start, energy0):
             torque[j, k] = _row(k, state, p, d, t, force, slip, sump, run_start, scratch, out)
             theta[j, k] = out[O_THETA]
     return torque, theta
-
-
-@njit(cache=True)
-def friction_grid(p, w_abs, pressure_mpa, theta):
-    """mu_f on arrays (same shape), for fitting and positivity checks."""
-    out = np.empty(w_abs.size)
-    for k in range(w_abs.size):
-        out[k] = friction_coefficient(w_abs[k], pressure_mpa[k], theta[k], p)
-    return out

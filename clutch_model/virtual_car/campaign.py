@@ -38,7 +38,7 @@ std ``torque_drift_nm``, time constant ``torque_drift_tau_s``).
 
 True friction: RC-1's (or the base model's) a0..a19 each multiplied by (1 + U(−s, s)),
 s = ``friction_spread`` (the thesis' Monte Carlo interval convention), redrawn (seeded) until
-μ_f > 0.01 on the grid P ∈ [0, 6] MPa, θ ∈ [0, 230] °C, ω ∈ [0, 30] rad/s. The exponent i
+μ_f ≥ 0.01 (certified, clutch_model.plant.friction) over P ∈ [0, 6] MPa, θ ∈ [0, 230] °C, ω ∈ [0, 30] rad/s. The exponent i
 is not perturbed.
 
 Bench (SAE#2 μPVT, thesis §5.1 "verification dataset"): for each sump temperature
@@ -94,6 +94,7 @@ from numba import njit
 
 from clutch_model.plant import kernels as K
 from clutch_model.plant import params as P
+from clutch_model.plant.friction import friction_grid, friction_positive
 from clutch_model.formats.bag_writer import DEFAULT_START_TIME_NS, RunSignals, TopicSeries
 from clutch_model.formats.bench_csv import BenchData
 from clutch_model.errors import DataError, ParamsError
@@ -269,22 +270,10 @@ class CampaignResult:
 
 # ----------------------------------------------------------------------------- truth
 def friction_is_positive(model: ClutchModel, minimum: float = MU_POSITIVE_MIN) -> bool:
-    """μ_f > minimum over FRICTION_CHECK_BOX (a 13 x 24 x 31 grid incl. the corners)."""
-    w = np.concatenate([[0.0, 1e-3, 0.005, 0.01, 0.02, 0.05], np.linspace(0.1, 30.0, 25)])
-    pr = np.linspace(*FRICTION_CHECK_BOX["pressure_mpa"], 13)
-    th = np.linspace(*FRICTION_CHECK_BOX["theta_c"], 24)
-    W, PP, TH = np.meshgrid(w, pr, th, indexing="ij")
-    # friction_grid floors at 0, so evaluate the raw Stribeck law here
-    mu = _raw_friction(model.vector(), W.ravel(), PP.ravel(), TH.ravel())
-    return bool(np.all(mu > minimum))
-
-
-def _raw_friction(p, w, pr, th):
-    a = p[P.FRICTION_A:P.FRICTION_A + 20]
-    pr2, th2 = pr * pr, th * th
-    poly = lambda j: a[j] + a[j + 1] * pr + a[j + 2] * pr2 + a[j + 3] * th + a[j + 4] * th2  # noqa: E731
-    mu_c, mu_s, w_s, k_v = poly(0), poly(5), np.maximum(poly(10), 1e-6), poly(15)
-    return mu_c + (mu_s - mu_c) * np.exp(-(w / w_s) ** p[P.FRICTION_I]) + k_v * w
+    """μ_f >= minimum over FRICTION_CHECK_BOX (the one friction positivity check)."""
+    return friction_positive(model.friction_coefficients, model.friction_exponent,
+                             FRICTION_CHECK_BOX["pressure_mpa"], FRICTION_CHECK_BOX["theta_c"],
+                             FRICTION_CHECK_BOX["slip_rad_s"], minimum=minimum)
 
 
 def perturb_friction(model: ClutchModel, spread: float, rng, max_tries: int = 1000):
@@ -438,7 +427,7 @@ def synthesize_bench(true_model: ClutchModel, spec: CampaignSpec, rng) -> BenchD
     arr = np.asarray(rows, dtype=float)
     w, pr, sump = arr[:, 0], arr[:, 1], arr[:, 2]
     plate = sump + 1.0 + 0.15 * pr * np.abs(w) + rng.normal(0.0, spec.bench_plate_noise_c, w.size)
-    mu = K.friction_grid(true_model.vector(), np.abs(w), pr, plate)
+    mu = friction_grid(true_model.friction_coefficients, true_model.friction_exponent, np.abs(w), pr, plate)
     mu = mu + rng.normal(0.0, spec.bench_noise, w.size)
     # logged resolution of the bench: 1e-4 rad/s, 1 kPa, 0.01 C, 1e-4
     return BenchData(slip_speed_rad_s=np.round(w, 4), pressure_mpa=np.round(pr, 3),
