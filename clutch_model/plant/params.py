@@ -17,7 +17,7 @@ import yaml
 
 from clutch_model.errors import ParamsError
 from clutch_model.plant.layout import *  # noqa: F401,F403  (kernel vector layout)
-from clutch_model.plant.mechanisms import mechanism_from_dict
+from clutch_model.plant.mechanisms import mechanism_from_dict, ordered
 
 REFERENCE_CLUTCH = Path(__file__).resolve().parents[2] / "config" / "reference_clutch.yaml"
 
@@ -146,7 +146,7 @@ class ClutchModel:
         p[FRICTION_A:FRICTION_A + N_FRICTION_COEFFS] = np.asarray(fr["a"], dtype=float)
         p[H0] = d["initial"]["film_thickness"]
         p[LOCK_SLIP] = d.get("lock_slip_rad_s", DEFAULT_LOCK_SLIP_RAD_S)
-        for m in self.mechanisms:
+        for m in ordered(self.mechanisms):
             m.apply_to_vector(p)
         return p
 
