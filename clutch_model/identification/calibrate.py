@@ -1,10 +1,11 @@
 """Calibration of the friction coefficients on car-test runs (measured torque) — regression
 counterpart of the thesis' Monte Carlo refinement (§5.3), beyond the thesis.
 
-scipy.optimize.least_squares (trust-region reflective, bounded) on the batch simulator:
-residuals are (predicted measured torque - measured torque) / sqrt(n), plus a ridge toward a
-prior (the bench fit) in relative units; the Jacobian is a forward difference computed as ONE
-batch-simulator call over the k+1 perturbed parameter sets. Only the coefficients the data can
+scipy.optimize.least_squares (trust-region reflective, bounded) on the one torque objective
+(``objective.TorqueLeastSquares``): residuals are (predicted measured torque - measured
+torque) / sqrt(n), plus a ridge toward a prior (the bench fit) in relative units; the Jacobian
+is a forward difference computed as ONE batch-simulator call over the k perturbed parameter
+sets. Only the coefficients the data can
 identify move (``sensitivity.identifiability_screen`` unless given). The result must keep
 mu_f >= 0 over P in [0, 6] MPa, theta in [0, 230] C, w in [0, 30] rad/s (§5.3 check,
 ``box.friction_positive``); if the optimum violates it, the step from the start is shortened
@@ -26,6 +27,7 @@ from clutch_model.errors import FitError
 from clutch_model.plant.params import ClutchModel
 from clutch_model.identification import box
 from clutch_model.identification.evaluate import CampaignInputs, as_campaign, param_rows, predict, rmse_of
+from clutch_model.identification.objective import TorqueLeastSquares
 
 
 @dataclass
@@ -158,46 +160,23 @@ def calibrate_friction(model: ClutchModel, runs_or_campaign, coefficients="auto"
         a[idx] = a_start[idx] + scale * x
         return a
 
-    def residual_from(pred_row, x):
-        r = (pred_row[inputs.mask] - meas) / sqrt_n
-        if lam > 0:
-            r = np.concatenate([r, lam * (x - prior_x)])
-        return r
+    def predict_rows(xs):
+        return predict(param_rows(base, np.array([coeffs(x) for x in xs])), inputs)
 
-    cache = {}
-    counter = {"n": 0, "it": 0}
-
-    def fun(x):
-        key = x.tobytes()
-        if key not in cache:
-            cache.clear()
-            cache[key] = predict(param_rows(base, coeffs(x)[None, :]), inputs)[0]
-            counter["n"] += 1
-        return residual_from(cache[key], x)
+    obj = TorqueLeastSquares(predict_rows, inputs.torque_measured, inputs.mask, scale=sqrt_n,
+                             ridge=lam, ridge_center=prior_x, steps=lambda x: np.full(x.size, fd_step))
 
     def jac(x):
-        h = fd_step
-        A = [coeffs(x)]
-        for j in range(idx.size):
-            xp = x.copy()
-            xp[j] += h
-            A.append(coeffs(xp))
-        pred = predict(param_rows(base, np.array(A)), inputs)      # ONE batch call, k+1 sets
-        counter["n"] += len(A)
-        counter["it"] += 1
-        say(f"iteration {counter['it']}: RMSE {math.sqrt(np.mean((pred[0][inputs.mask] - meas) ** 2)):.3f}")
-        d = (pred[1:, inputs.mask] - pred[0][inputs.mask][None, :]) / (h * sqrt_n)
-        J = d.T
-        if lam > 0:
-            J = np.vstack([J, lam * np.eye(idx.size)])
+        J = obj.jacobian(x)
+        say(f"iteration {obj.jacobians}: RMSE {obj.data_rmse(x):.3f}")
         return J
 
     x0 = np.zeros(idx.size)
     lb = np.full(idx.size, -max_rel_change)
     ub = np.full(idx.size, max_rel_change)
-    res = least_squares(fun, x0, jac=jac, bounds=(lb, ub), method="trf", x_scale=1.0,
+    res = least_squares(obj.residuals, x0, jac=jac, bounds=(lb, ub), method="trf", x_scale=1.0,
                         max_nfev=max_iterations, xtol=1e-10, ftol=1e-10, gtol=1e-10)
-    n_eval += counter["n"]
+    n_eval += obj.evaluations
     a_opt = coeffs(res.x)
     start_positive = box.friction_positive(a_start, i_exp)
     frac = 1.0
@@ -235,6 +214,6 @@ def calibrate_friction(model: ClutchModel, runs_or_campaign, coefficients="auto"
     return CalibrationResult(model=model.with_friction(a=a_after), rmse_before=rmse0, rmse_after=rmse1,
                              coefficients_moved=[int(k) for k in idx], a_before=a_start, a_after=a_after,
                              stderr=stderr, covariance=cov, residual_std=math.sqrt(s2), n_evaluations=n_eval,
-                             n_iterations=counter["it"], positive=bool(positive), backtracked=frac,
+                             n_iterations=obj.jacobians, positive=bool(positive), backtracked=frac,
                              elapsed_s=time.perf_counter() - t0, message=str(res.message), screen=screen,
                              notes=notes)

@@ -101,35 +101,12 @@ from clutch_model.errors import DataError, ParamsError
 from clutch_model.plant.mechanisms import CATALOG, make_mechanism
 from clutch_model.plant.params import ClutchModel, load_model
 
-MECHANISM_PARAMETER = {
-    "actuator_lag": "tau_s",
-    "actuator_hysteresis": "ratio",
-    "spring_preload": "preload_n",
-    "friction_degradation": "energy_scale_j",
-    "torque_offset": "offset_nm",
-    "transport_delay": "delay_s",
-    "drag_torque": "coeff_nm_per_rad_s",
-}
-DEFAULT_MAGNITUDE = {
-    "actuator_lag": 0.15,
-    "actuator_hysteresis": 0.12,
-    "spring_preload": 800.0,
-    "friction_degradation": None,   # -> 12 % drop of mu over the campaign
-    "torque_offset": 25.0,
-    "transport_delay": 0.08,
-    "drag_torque": 6.0,
-}
-VISIBLE_RANGE = {
-    "actuator_lag": (0.05, 0.3),
-    "actuator_hysteresis": (0.05, 0.2),
-    "spring_preload": (300.0, 1500.0),
-    "friction_degradation": None,
-    "torque_offset": (10.0, 50.0),
-    "transport_delay": (0.02, 0.2),
-    "drag_torque": (2.0, 10.0),
-    "torque_ripple": (0.03, 0.15),
-    "pressure_temperature_cross": (1e-3, 4e-3),
-}
+# what the car draws for each catalog mechanism comes from the mechanism objects
+MECHANISM_PARAMETER = {mid: cls.magnitude_parameter() for mid, cls in CATALOG.items()}
+DEFAULT_MAGNITUDE = {mid: cls.virtual_car.default for mid, cls in CATALOG.items()}
+VISIBLE_RANGE = {**{mid: cls.virtual_car.visible for mid, cls in CATALOG.items()},
+                 "torque_ripple": (0.03, 0.15),
+                 "pressure_temperature_cross": (1e-3, 4e-3)}
 EXTRA_EFFECTS = {
     "torque_ripple": "sensor torque x (1 + A sin(k phi + phi0)), phi = slip angle (int w dt) "
                      "per run: once-per-revolution runout / plate-parallelism ripple",
