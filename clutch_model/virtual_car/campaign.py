@@ -63,6 +63,10 @@ sensor torque against the no-mechanism twin at the default magnitude (seeds 1-3)
 | torque_offset | offset_nm [N·m] | 10-50 | 25 | 25 N·m | constant shift, plain during releases |
 | transport_delay | delay_s [s] | 0.02-0.2 | 0.08 | 110-135 N·m | torque edges late vs force edges |
 | drag_torque | coeff_nm_per_rad_s | 2-10 | 6 | 25-32 N·m | + coeff·ω·ν(θ)/ν(60 °C) always; plainest at release force, cold |
+| torque_sensor_lag | tau_s [s] | 0.02-0.2 | 0.06 | 76-87 N·m (seeds 1-2) | torque edges rounded (first-order) vs force edges |
+
+The visible ranges and defaults live on the mechanism objects (``Mechanism.virtual_car``);
+the table restates them with the effect they have.
 
 (A physically typical open-pack drag is < 1 N·m/(rad/s), which would hide in the 8 N·m
 noise — the range above is what a diagnosis can be expected to see.)
