@@ -7,7 +7,6 @@ CLUTCH_HIDDEN_SEED=<int> draws other magnitudes and campaigns (default: a fixed 
 reproducible). bench/bench_diagnose.py runs the same check over many seeds.
 """
 import json
-import math
 import os
 
 import numpy as np
