@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import argparse
 import filecmp
-import os
 import shutil
 import sys
 import tempfile
@@ -98,7 +97,6 @@ def check_sample_data(out_dir=SAMPLE_DIR) -> list:
 
 
 def main(argv=None) -> int:
-    os.environ.setdefault("NUMBA_CACHE_DIR", str(SAMPLE_DIR.parent / ".numba_cache"))
     ap = argparse.ArgumentParser(prog="python -m clutch_model.virtual_car.sample_bags",
                                  description="Write the sample bags and bench table.")
     ap.add_argument("--out", default=str(SAMPLE_DIR), help=f"directory (default {SAMPLE_DIR})")
