@@ -32,14 +32,21 @@ def bench_rc1(rc1):
     return td.synthetic_bench(rc1, noise=0.002, seed=3)
 
 
-def grid_friction_min(a, i, p=(0, 6), th=(0, 230), w=(0, 30)):
-    """Independent dense-grid evaluation of the raw Stribeck law (no code shared with box)."""
+def stribeck_mu(a, i, P, T, W):
+    """The Stribeck friction law written out independently of the package:
+    mu = g0 + (g1 - g0) exp(-(|w| / ws)^i) + g3 |w|, each g a quadratic in P (MPa) and T (C)."""
     a = np.asarray(a, float)
-    P, T, W = np.meshgrid(np.linspace(*p, 31), np.linspace(*th, 47),
-                          np.concatenate([np.linspace(*w, 61), np.geomspace(1e-4, w[1], 60)]), indexing="ij")
+    P, T, W = (np.asarray(x, float) for x in (P, T, W))
 
     def poly(k):
         return a[k] + a[k + 1] * P + a[k + 2] * P ** 2 + a[k + 3] * T + a[k + 4] * T ** 2
 
     ws = np.maximum(poly(10), 1e-6)
-    return float((poly(0) + (poly(5) - poly(0)) * np.exp(-(W / ws) ** i) + poly(15) * W).min())
+    return poly(0) + (poly(5) - poly(0)) * np.exp(-(np.abs(W) / ws) ** i) + poly(15) * np.abs(W)
+
+
+def grid_friction_min(a, i, p=(0, 6), th=(0, 230), w=(0, 30)):
+    """Independent dense-grid evaluation of the raw Stribeck law (no code shared with box)."""
+    P, T, W = np.meshgrid(np.linspace(*p, 31), np.linspace(*th, 47),
+                          np.concatenate([np.linspace(*w, 61), np.geomspace(1e-4, w[1], 60)]), indexing="ij")
+    return float(stribeck_mu(a, i, P, T, W).min())
