@@ -30,7 +30,7 @@ from numba import njit
 
 from clutch_model.plant.kernels import P_MAX_MPA, THETA_MAX_C
 
-# the box the polynomials are constrained on (thesis §5.2.1, CONTRACT)
+# the box the polynomials are constrained on (thesis §5.2.1, docs/model.md)
 P_BOX = (0.0, P_MAX_MPA)
 THETA_BOX = (0.0, THETA_MAX_C)
 # the box of the positivity check of §5.3 (car operating range)
@@ -38,7 +38,7 @@ CAR_P_BOX = (0.0, 6.0)
 CAR_THETA_BOX = (0.0, 230.0)
 CAR_W_BOX = (0.0, 30.0)
 
-# blocks of the coefficient vector a0..a19 (table 6.3 / CONTRACT order)
+# blocks of the coefficient vector a0..a19 (thesis table 6.3 order, docs/model.md)
 BLOCKS = {"mu_C": slice(0, 5), "mu_S": slice(5, 10), "omega_S": slice(10, 15), "k_V": slice(15, 20)}
 BLOCK_OF = ["mu_C"] * 5 + ["mu_S"] * 5 + ["omega_S"] * 5 + ["k_V"] * 5
 MONOMIAL = ["1", "P", "P^2", "theta", "theta^2"]

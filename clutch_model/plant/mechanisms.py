@@ -1,4 +1,4 @@
-"""Candidate model extensions (CONTRACT.md, "Diagnosis: mechanism catalog").
+"""Candidate model extensions (docs/mechanisms.md).
 
 Each mechanism is one small object, in the manner of PySINDy's candidate terms: an id,
 its physical parameters with bounds, and how it changes the plant (written into the kernel

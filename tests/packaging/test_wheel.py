@@ -2,6 +2,7 @@
 the shipped reference clutch, simulates, reads the ClutchState typestore and answers
 `clutch-sim --help`, with the checkout not importable."""
 import os
+import shutil
 import subprocess
 import sys
 import zipfile
@@ -34,9 +35,14 @@ print(json.dumps({{"file": clutch_model.__file__, "torque": r.torque_nm.tolist()
 @pytest.fixture(scope="module")
 def installed(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("wheel")
-    wheels, target = tmp / "wheels", tmp / "site"
+    wheels, target, src = tmp / "wheels", tmp / "site", tmp / "src"
+    # build from a clean copy of the sources: setuptools builds in the source tree, and a stale
+    # build/ there could slip deleted modules into the wheel
+    shutil.copytree(REPO, src, symlinks=True, ignore=shutil.ignore_patterns(
+        ".git", ".venv", "build", "dist", "*.egg-info", "__pycache__", ".numba_cache", ".pytest_cache",
+        "bags", "out", "runs"))
     subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q",
-                    "-w", str(wheels), str(REPO)], check=True, capture_output=True, timeout=300)
+                    "-w", str(wheels), str(src)], check=True, capture_output=True, timeout=300)
     (wheel,) = wheels.glob("clutch_sim-*.whl")
     subprocess.run([sys.executable, "-m", "pip", "install", "--no-deps", "-q", "--target", str(target),
                     str(wheel)], check=True, capture_output=True, timeout=300)
