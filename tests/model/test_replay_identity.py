@@ -24,7 +24,7 @@ def test_sample_bag_replay_equals_stored_reference(tmp_path):
     out = tmp_path / "replay.csv"
     assert cli(["replay", "--bag", *BAGS, "--out", str(out)]) == 0
     got, ref = _read(out), _read(REFERENCE)
-    assert list(got[0].keys()) == list(ref[0].keys())
+    assert set(ref[0]) <= set(got[0])          # columns added later (e.g. `locked`) are not compared
     assert len(got) == len(ref) == 5400
     assert [r["bag"] for r in got] == [r["bag"] for r in ref]
     for col in ref[0]:
