@@ -2,7 +2,8 @@
 import numpy as np
 import pytest
 
-from clutch_model import load_model
+from clutch_model import load_model, predict_measured_torque, simulate
+from clutch_model.formats.bag_reader import Campaign
 from clutch_model.virtual_car import identification_data as td
 
 NOISE_NM = 15.0
@@ -55,3 +56,22 @@ def grid_friction_min(a, i, p=(0, 6), th=(0, 230), w=(0, 30)):
     P, T, W = np.meshgrid(np.linspace(*p, 31), np.linspace(*th, 47),
                           np.concatenate([np.linspace(*w, 61), np.geomspace(1e-4, w[1], 60)]), indexing="ij")
     return float(stribeck_mu(a, i, P, T, W, pinned=False).min())
+
+
+def noise_free_rmse(model, truth, runs):
+    """RMSE between the model's and the truth's plant torque on the runs' inputs (no noise)."""
+    camp = Campaign(list(runs))
+
+    def torque(m):
+        return simulate(m, camp.t, camp.force, camp.slip, camp.sump, run_start=camp.run_start).torque_nm
+
+    return float(np.sqrt(np.mean((torque(model) - torque(truth)) ** 2)))
+
+
+def measured_rmse(model, runs):
+    """RMSE of the model's predicted sensor torque against the runs' measured torque, computed
+    from the public simulator (not the identification code path)."""
+    camp = Campaign(list(runs))
+    sim = simulate(model, camp.t, camp.force, camp.slip, camp.sump, run_start=camp.run_start)
+    pred = predict_measured_torque(model, camp.t, sim.torque_nm, camp.run_start)
+    return float(np.sqrt(np.mean((pred - camp.torque_measured) ** 2)))

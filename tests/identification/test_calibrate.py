@@ -1,34 +1,16 @@
 import numpy as np
 import pytest
 
-from clutch_model import simulate
 from clutch_model.errors import FitError
-from clutch_model.formats.bag_reader import Campaign
 from clutch_model.identification.calibrate import calibrate_friction
-from clutch_model.identification.evaluate import CampaignInputs, rmse_of
 
-from .conftest import NOISE_NM, TRUTH_REL, grid_friction_min
-
-
-def held_out_rmse(model, runs):
-    inp = CampaignInputs.from_campaign(runs, model)
-    return float(rmse_of(model.vector(), model.friction_coefficients[None, :], inp)[0])
-
-
-def noise_free_rmse(model, truth, runs):
-    """RMSE between the model's and the truth's plant torque on the runs' inputs (no noise)."""
-    camp = Campaign(list(runs))
-
-    def torque(m):
-        return simulate(m, camp.t, camp.force, camp.slip, camp.sump, run_start=camp.run_start).torque_nm
-
-    return float(np.sqrt(np.mean((torque(model) - torque(truth)) ** 2)))
+from .conftest import NOISE_NM, TRUTH_REL, grid_friction_min, measured_rmse, noise_free_rmse
 
 
 def test_calibration_recovers_the_true_clutch(rc1, truth, car_runs):
     fit_runs, held = car_runs
     res = calibrate_friction(rc1, fit_runs)
-    before, after = held_out_rmse(rc1, held), held_out_rmse(res.model, held)
+    before, after = measured_rmse(rc1, held), measured_rmse(res.model, held)
     assert before > 5 * NOISE_NM
     assert after < 1.1 * NOISE_NM, (before, after)
     assert res.rmse_after < res.rmse_before and res.rmse_after < 1.1 * NOISE_NM

@@ -4,14 +4,14 @@ import json
 import numpy as np
 import pytest
 
-from clutch_model import predict_measured_torque, simulate
-from clutch_model.formats.bag_reader import Campaign, read_bags
+from clutch_model import simulate
+from clutch_model.formats.bag_reader import read_bags
 from clutch_model.formats.bench_csv import read_bench, write_bench
 from clutch_model.virtual_car import identification_data as td
 from clutch_model.plant.params import load_model
 from clutch_sim.cli import main
 
-from .conftest import stribeck_mu
+from .conftest import measured_rmse, stribeck_mu
 
 
 @pytest.fixture(scope="module")
@@ -81,15 +81,6 @@ def test_calibrate_cli(files, capsys):
     _one_line_error(capsys, main(["calibrate", "--bags", str(d / "nope"), "--out", str(d / "c.yaml")]))
 
 
-def measured_rmse(model, bags):
-    """RMSE of the model's predicted sensor torque against the bags' measured torque, computed
-    here from the public simulator (not the Monte Carlo code path)."""
-    camp = Campaign(read_bags(bags))
-    sim = simulate(model, camp.t, camp.force, camp.slip, camp.sump, run_start=camp.run_start)
-    pred = predict_measured_torque(model, camp.t, sim.torque_nm, camp.run_start)
-    return float(np.sqrt(np.mean((pred - camp.torque_measured) ** 2)))
-
-
 def test_montecarlo_cli(files, capsys, rc1):
     d, bags = files
     out = d / "mc"
@@ -107,8 +98,8 @@ def test_montecarlo_cli(files, capsys, rc1):
     assert np.all(np.abs(z["samples"] - a0) <= 0.05 * np.abs(a0) + 1e-15)
     np.testing.assert_array_equal(refined.friction_coefficients, summary["refined_a"])
     # the RMSEs it reports are the ones an independent replay of the bags gives
-    assert summary["rmse_nominal"] == pytest.approx(measured_rmse(rc1, bags[:2]), rel=1e-6)
-    assert summary["rmse_refined"] == pytest.approx(measured_rmse(refined, bags[:2]), rel=1e-6)
+    assert summary["rmse_nominal"] == pytest.approx(measured_rmse(rc1, read_bags(bags[:2])), rel=1e-6)
+    assert summary["rmse_refined"] == pytest.approx(measured_rmse(refined, read_bags(bags[:2])), rel=1e-6)
     assert summary["rmse_refined"] < 0.5 * summary["rmse_nominal"]
     capsys.readouterr()
     _one_line_error(capsys, main(["montecarlo", "--bags", *bags[:1], "--samples", "4", "--spread", "2",

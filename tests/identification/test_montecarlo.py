@@ -1,14 +1,11 @@
 import numpy as np
 import pytest
 
-from clutch_model.identification.evaluate import CampaignInputs, rmse_of
 from clutch_model.identification.halving import interval_halving
 from clutch_model.identification.montecarlo import chunk_indices, draw_samples, run_montecarlo
 from clutch_model.plant.params import load_model
-from clutch_model import simulate
-from clutch_model.formats.bag_reader import Campaign
 
-from .conftest import NOISE_NM, grid_friction_min
+from .conftest import NOISE_NM, grid_friction_min, measured_rmse, noise_free_rmse
 
 
 def test_draw_samples_reproducible_and_bounded(rc1):
@@ -52,19 +49,13 @@ def test_montecarlo_improves_held_out_rmse(rc1, truth, car_runs, mc_serial):
     assert np.array_equal(res.accepted, grid_min >= 0.0)
     assert np.all(np.isnan(res.rmse[~res.accepted])) and np.all(np.isfinite(res.rmse[res.accepted]))
     assert res.better.sum() > 0 and res.rmse_refined < res.rmse_nominal
-    inp = CampaignInputs.from_campaign(car_runs[1], rc1)
-    nominal = rmse_of(rc1.vector(), rc1.friction_coefficients[None], inp)[0]
-    refined = rmse_of(rc1.vector(), res.refined_a[None], inp)[0]
+    nominal = measured_rmse(rc1, car_runs[1])
+    refined = measured_rmse(rc1.with_friction(a=res.refined_a), car_runs[1])
     assert refined < 0.5 * nominal
     assert refined < 3 * NOISE_NM
     # closer to the truth's plant torque on the held-out inputs (noise-free) than RC-1 is
-    camp = Campaign(list(car_runs[1]))
-
-    def torque(m):
-        return simulate(m, camp.t, camp.force, camp.slip, camp.sump, run_start=camp.run_start).torque_nm
-
-    dev = lambda m: float(np.sqrt(np.mean((torque(m) - torque(truth)) ** 2)))  # noqa: E731
-    assert dev(rc1.with_friction(a=res.refined_a)) < 0.35 * dev(rc1)
+    held = car_runs[1]
+    assert noise_free_rmse(rc1.with_friction(a=res.refined_a), truth, held) < 0.35 * noise_free_rmse(rc1, truth, held)
     assert grid_friction_min(res.refined_a, rc1.friction_exponent) >= 0.0
 
 
