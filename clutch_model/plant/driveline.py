@@ -58,7 +58,7 @@ N_DL_OUT = K.N_OUT + 5
 
 MAX_STEP_S = 0.001          # speed sub-step; 1 kHz node ticks are one sub-step
 MIN_LOCK_SLIP = 1e-9        # lock band floor (lock_slip_rad_s = 0 still locks at a located zero)
-GAMMA = 1.0 + 1.0 / math.sqrt(2.0)
+GAMMA = 1.0 - 1.0 / math.sqrt(2.0)
 MAX_CROSSING_ITER = 40
 MAX_EVENTS = 64             # zero crossings handled per sub-step
 
@@ -126,8 +126,11 @@ def _slope(x, s, t0, sump, p, d, rec):
 
 
 @njit(cache=True)
-def _ros2(x, h, tau_a, tau_b, sump, p, d, q, rec):
-    """Speeds after one ROS2 step of length h from the current state (not committed)."""
+def _slip_step(x, h, tau_a, tau_b, sump, p, d, q, rec, scratch):
+    """One coupled sub-step of length h while slipping, committed to x: ROS2 on the speeds,
+    the film and pack temperature advanced in between (stage 1 sees the state at the start,
+    stage 2 the state at the end, so the film's squeeze enters to second order; the heat input
+    is the trapezoid of the start power and the power at the predicted end slip)."""
     ja, jb, ca, cb = q[Q_JA], q[Q_JB], q[Q_CA], q[Q_CB]
     wa, wb = x[X_WA], x[X_WB]
     s = wa - wb
@@ -145,12 +148,23 @@ def _ros2(x, h, tau_a, tau_b, sump, p, d, q, rec):
     k1b = (m11 * fb - m21 * fa) / det
     wa2 = wa + h * k1a
     wb2 = wb + h * k1b
-    t2 = plant_torque(x, wa2 - wb2, sump, p, d, rec)
+    s2 = wa2 - wb2
+    if s2 * x[K.S_SIGN] < 0.0:
+        # the stage point lies beyond zero slip: the torque is continued from this side (its
+        # value at zero, the capacity with the current sign), so the step is a continuous
+        # function of h and a crossing is located, not jumped over
+        s2 = 0.0
+    K.advance(x[:K.N_STATE], s2, sump, h, p, d, scratch)
+    t2 = plant_torque(x, s2, sump, p, d, rec)
     fa = (tau_a - ca * wa2 - t2) / ja - 2.0 * k1a
     fb = (tau_b - cb * wb2 + t2) / jb - 2.0 * k1b
     k2a = (m22 * fa - m12 * fb) / det
     k2b = (m11 * fb - m21 * fa) / det
-    return wa + h * (1.5 * k1a + 0.5 * k2a), wb + h * (1.5 * k1b + 0.5 * k2b)
+    x[X_WA] = wa + h * (1.5 * k1a + 0.5 * k2a)
+    x[X_WB] = wb + h * (1.5 * k1b + 0.5 * k2b)
+    s1 = x[X_WA] - x[X_WB]
+    if s1 * x[K.S_SIGN] >= 0.0:
+        K.outputs(x[:K.N_STATE], s1, sump, p, d, rec)   # power at the end: next step's start
 
 
 @njit(cache=True)
@@ -166,6 +180,7 @@ def try_stick(x, tau_a, tau_b, sump, p, d, q, rec):
         x[X_WA] = w
         x[X_WB] = w
         x[X_LOCKED] = 1.0
+        x[K.S_POWER] = 0.0
         return True
     return False
 
@@ -179,20 +194,21 @@ def _break_loose(x, t_lock):
 
 
 @njit(cache=True)
-def _locate_zero(x, h, s0, s1, tau_a, tau_b, sump, p, d, q, rec):
-    """Step length at which the slip reaches zero (Illinois regula falsi on the ROS2 map).
-    Returns (length, w_a, w_b) at that length."""
+def _locate_zero(x, x0, h, s0, s1, tau_a, tau_b, sump, p, d, q, rec, scratch):
+    """Step from x0 to where the slip reaches zero (Illinois regula falsi on the step length);
+    x holds the state there. Returns the step length."""
     tol = 1e-3 * p[P.LOCK_SLIP]
     a, fa = 0.0, s0
     b, fb = h, s1
     side = 0
-    hh, wa, wb = h, x[X_WA], x[X_WB]
+    hh = h
     for _ in range(MAX_CROSSING_ITER):
         hh = (a * fb - b * fa) / (fb - fa)
         if not (hh > a and hh < b):
             hh = 0.5 * (a + b)
-        wa, wb = _ros2(x, hh, tau_a, tau_b, sump, p, d, q, rec)
-        s = wa - wb
+        x[:] = x0
+        _slip_step(x, hh, tau_a, tau_b, sump, p, d, q, rec, scratch)
+        s = x[X_WA] - x[X_WB]
         if abs(s) <= tol:
             break
         if s * fa > 0.0:
@@ -205,11 +221,11 @@ def _locate_zero(x, h, s0, s1, tau_a, tau_b, sump, p, d, q, rec):
             if side == 1:
                 fa *= 0.5
             side = 1
-    return hh, wa, wb
+    return hh
 
 
 @njit(cache=True)
-def _substep(x, h, tau_a, tau_b, sump, p, d, q, rec, scratch):
+def _substep(x, x0, h, tau_a, tau_b, sump, p, d, q, rec, scratch):
     band = p[P.LOCK_SLIP]
     remaining = h
     events = 0
@@ -225,22 +241,17 @@ def _substep(x, h, tau_a, tau_b, sump, p, d, q, rec, scratch):
                 return
             _break_loose(x, t_lock)
         s0 = x[X_WA] - x[X_WB]
-        wa, wb = _ros2(x, remaining, tau_a, tau_b, sump, p, d, q, rec)
-        s1 = wa - wb
+        x0[:] = x
+        _slip_step(x, remaining, tau_a, tau_b, sump, p, d, q, rec, scratch)
+        s1 = x[X_WA] - x[X_WB]
         if s0 * s1 < 0.0 and abs(s0) >= band and events < MAX_EVENTS:
             # the slip crosses zero inside the step: go to the crossing, then stick or slip on
             events += 1
-            hh, wa, wb = _locate_zero(x, remaining, s0, s1, tau_a, tau_b, sump, p, d, q, rec)
-            x[X_WA] = wa
-            x[X_WB] = wb
-            K.advance(x[:K.N_STATE], wa - wb, sump, hh, p, d, scratch)
+            hh = _locate_zero(x, x0, remaining, s0, s1, tau_a, tau_b, sump, p, d, q, rec, scratch)
             remaining -= hh
-            if abs(wa - wb) < band and not try_stick(x, tau_a, tau_b, sump, p, d, q, rec):
+            if abs(x[X_WA] - x[X_WB]) < band and not try_stick(x, tau_a, tau_b, sump, p, d, q, rec):
                 _break_loose(x, lock_torque(q, common_speed(x, q), tau_a, tau_b))
             continue
-        x[X_WA] = wa
-        x[X_WB] = wb
-        K.advance(x[:K.N_STATE], s1, sump, remaining, p, d, scratch)
         try_stick(x, tau_a, tau_b, sump, p, d, q, rec)
         return
 
@@ -257,8 +268,9 @@ def advance(x, tau_a, tau_b, sump, dt, p, d, q, scratch):
         n = 1
     h = dt / n
     rec = np.empty(K.N_OUT)
+    x0 = np.empty(N_DL_STATE)
     for _ in range(n):
-        _substep(x, h, tau_a, tau_b, sump, p, d, q, rec, scratch)
+        _substep(x, x0, h, tau_a, tau_b, sump, p, d, q, rec, scratch)
 
 
 @njit(cache=True)
