@@ -13,7 +13,7 @@ import os
 import sys
 
 COMMANDS = ["replay", "synth", "fit_friction", "fit_thermal", "calibrate", "montecarlo",
-            "sensitivity", "diagnose", "play", "record"]
+            "sensitivity", "diagnose", "play", "record", "driveline"]
 
 
 def add_params_option(parser: argparse.ArgumentParser) -> None:
