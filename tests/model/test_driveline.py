@@ -306,3 +306,26 @@ def test_fuzzed_inputs_never_nan(force, tau_a, tau_b, speeds, lock_slip, dt):
         assert np.all(np.isfinite(arr))
     assert np.all(r.slip_speed_rad_s[r.locked] == 0.0)
     assert np.all(np.abs(r.clutch_torque_nm[r.locked]) <= r.static_capacity_nm[r.locked] * (1 + 1e-12))
+
+
+@pytest.mark.parametrize("factor", [0.999, 1.002])
+def test_full_plant_at_the_capacity_boundary_does_not_chatter(factor):
+    """RC-1 (Stribeck friction rising with slip): a torque needing 0.999 x the static capacity
+    stays locked; 1.002 x breaks loose once and settles at the small slip where the sliding
+    torque equals the needed torque, without returning to lock."""
+    ja, jb = 0.5, 1.2
+    t = np.arange(0, 4.0, 0.001)
+    settle = simulate_driveline(MODEL, t[t < 2.0], 3000.0, 0.0, 0.0, 60.0, DrivelineParams(ja, jb, 0.0, 0.0, 10, 10))
+    capacity = settle.static_capacity_nm[-1]
+    tau_a = np.where(t < 2.0, 0.0, factor * capacity * (ja + jb) / jb)
+    r = simulate_driveline(MODEL, t, 3000.0, tau_a, 0.0, 60.0, DrivelineParams(ja, jb, 0.0, 0.0, 10, 10))
+    late = t >= 2.0
+    if factor < 1:
+        assert r.locked.all()
+    else:
+        assert r.locked[~late].all() and not r.locked[late].any()
+        assert np.count_nonzero(np.diff(r.locked.astype(int))) == 1
+        needed = factor * capacity
+        assert r.clutch_torque_nm[-1] == pytest.approx(needed, rel=1e-4)
+        assert 0 < r.slip_speed_rad_s[-1] < 0.05
+        assert np.all(np.abs(np.diff(r.slip_speed_rad_s[t > 3.0])) < 1e-4)   # steady, no oscillation
