@@ -170,6 +170,7 @@ class DrivelinePlant:
     >>> plant = DrivelinePlant(model, DrivelineParams(...)); plant.reset(force, sump)
     >>> rec = plant.sample(force, torque_a, torque_b, sump)   # record at the current state
     >>> plant.advance(dt)                                      # last sample's inputs held over dt
+    >>> rec = plant.step(dt, force, torque_a, torque_b, sump)  # the two in one (advance, then sample)
 
     ``rec`` is the kernels' record (``K.O_*``; O_TORQUE is the transmitted torque, O_LOCKED the
     stick phase) followed by ``driveline.R_WA, R_WB, R_SLIP, R_CAPACITY, R_LOCK_TORQUE``.
@@ -206,6 +207,13 @@ class DrivelinePlant:
         DL.sample(self.state, float(applied_force_n), self._tau_a, self._tau_b, self._sump,
                   self._p, self._d, self._q, self.record)
         return self.record
+
+    def step(self, dt: float, applied_force_n: float, torque_a_nm: float, torque_b_nm: float,
+             sump_temperature_c: float) -> np.ndarray:
+        """advance(dt) with the previous sample's inputs held, then sample the new inputs (the
+        node's sim-time order: the record at t + dt from the state there and the inputs at t + dt)."""
+        self.advance(dt)
+        return self.sample(applied_force_n, torque_a_nm, torque_b_nm, sump_temperature_c)
 
     def advance(self, dt: float) -> None:
         DL.advance(self.state, self._tau_a, self._tau_b, self._sump, float(dt), self._p, self._d,

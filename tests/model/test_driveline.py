@@ -255,6 +255,12 @@ def test_step_simulator_equals_trajectory_simulator():
         assert plant.locked == r.locked[k]
     np.testing.assert_array_equal(recs[:, K.O_TORQUE], r.clutch_torque_nm)
     np.testing.assert_array_equal(recs[:, DL.R_SLIP], r.slip_speed_rad_s)
+    stepper = DrivelinePlant(MODEL, dl)
+    stepper.reset(force[0], 60.0)
+    first = stepper.sample(force[0], tau_a[0], tau_b[0], 60.0)[K.O_TORQUE]
+    stepped = [first] + [stepper.step(t[k] - t[k - 1], force[k], tau_a[k], tau_b[k], 60.0)[K.O_TORQUE]
+                         for k in range(1, t.size)]
+    np.testing.assert_array_equal(stepped, r.clutch_torque_nm)
     # a controller that returns the same samples gives the same trajectory
     rc = simulate_driveline(MODEL, t, lambda tk, wa, wb: float(np.interp(tk, t, force)), tau_a, tau_b, 60.0, dl)
     np.testing.assert_array_equal(rc.speed_b_rad_s, r.speed_b_rad_s)
