@@ -338,3 +338,24 @@ def run_driveline(p, q, t, force, tau_a, tau_b, sump, energy0):
             advance(x, tau_a[k - 1], tau_b[k - 1], sump[k - 1], t[k] - t[k - 1], p, d, q, scratch)
         sample(x, force[k], tau_a[k], tau_b[k], sump[k], p, d, q, out[k])
     return out
+
+
+def _drop_stale_cache() -> None:
+    """numba invalidates a cached function only when its own source file changes; these kernels
+    compile the functions of kernels.py into themselves, so their cache entries older than
+    kernels.py (or params.py) are removed here and recompiled on first use."""
+    import os
+
+    try:
+        cache_dir = sample._cache._cache_path
+        newest_dependency = max(os.stat(K.__file__).st_mtime, os.stat(P.__file__).st_mtime)
+        for name in os.listdir(cache_dir):
+            if name.startswith("driveline.") and name.endswith((".nbi", ".nbc")):
+                path = os.path.join(cache_dir, name)
+                if os.stat(path).st_mtime < newest_dependency:
+                    os.remove(path)
+    except (AttributeError, OSError):
+        pass   # no cache configured, or another process got there first
+
+
+_drop_stale_cache()
