@@ -190,6 +190,10 @@ class DrivelinePlant:
         self._tau_a = self._tau_b = 0.0
         self._sump = 20.0
         self.max_pack_force_n = float(self._d[K.D_FMAX])
+        # compile (or load from numba's cache) every kernel now, at start-up, not on the first tick
+        self.reset(0.0, 20.0)
+        self.sample(0.0, 1.0, 0.0, 20.0)
+        self.advance(1e-3)
         self.reset(0.0, 20.0)
 
     def reset(self, applied_force_n: float, sump_temperature_c: float, keep_energy_j: float = 0.0) -> None:
