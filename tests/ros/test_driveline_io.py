@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from clutch_model import DrivelineParams, load_model, simulate_driveline
+from clutch_model.plant import kernels as K
 from clutch_sim_ros import driveline_io as DIO
 
 from .conftest import Client
@@ -101,3 +102,51 @@ def test_lockstep_over_dds_equals_offline(domain_id):
     finally:
         rig.close()
         host.close()
+
+
+def test_rig_sequence_through_the_node_path():
+    """The rig checks of the issue on DrivelineSource, stepped as the node steps (1 kHz, held
+    inputs): open clutch keeps the speeds apart; force locks the sides and they stay locked; a
+    torque while locked accelerates both together with the clutch carrying the inertia-weighted
+    share; less force lets them break loose; momentum balances throughout (no losses)."""
+    ja, jb = 0.5, 1.2
+    src = DIO.DrivelineSource(load_model(), DrivelineParams(ja, jb, 0.0, 0.0, 30.0, 10.0))
+    dt, ms = 0.001, 1_000_000
+    log = []
+    impulse = 0.0
+    tau_prev = 0.0
+
+    def run(seconds, force, tau_a):
+        nonlocal impulse, tau_prev
+        for _ in range(int(round(seconds / dt))):
+            k = len(log)
+            if k == 0:
+                src.reset(force, 60.0)
+            else:
+                src.advance(dt)
+                impulse += tau_prev * dt
+            if tau_a is not None:
+                src.torques.torque_a.offer(tau_a)
+            rec = src.sample(force, 60.0, k * ms, 10.0)
+            tau_prev = src.last_torques[0] + src.last_torques[1]
+            slip, wa, wb = DIO.DrivelineSource.outputs(rec)
+            log.append((slip, wa, wb, rec[K.O_TORQUE], bool(rec[K.O_LOCKED]), ja * wa + jb * wb - impulse))
+
+    run(0.5, 0.0, None)                                   # open clutch, no torques
+    open_phase = np.array(log)
+    assert np.all(open_phase[:, 0] > 19.0) and not open_phase[:, 4].any()
+    run(1.5, 6000.0, None)                                # press: locks and stays locked
+    locked_from = next(i for i, row in enumerate(log) if row[4])
+    assert all(row[4] and row[0] == 0.0 for row in log[locked_from:])
+    n0 = len(log)
+    run(0.5, 6000.0, 300.0)                               # torque on side a while locked
+    phase = np.array(log[n0 + 1:])
+    assert phase[:, 4].all()
+    np.testing.assert_allclose(np.diff(phase[:, 1]) / dt, 300.0 / (ja + jb), rtol=1e-9)
+    np.testing.assert_allclose(phase[:, 3], jb * 300.0 / (ja + jb), rtol=1e-12)
+    n1 = len(log)
+    run(1.0, 300.0, 300.0)                                # less force: breaks loose
+    assert not log[-1][4] and log[-1][0] > 0.0
+    assert any(row[4] for row in log[n1:n1 + 5]) and not all(row[4] for row in log[n1:])
+    momentum = np.array([row[5] for row in log])
+    np.testing.assert_allclose(momentum, momentum[0], rtol=1e-12)
