@@ -150,3 +150,24 @@ def test_rig_sequence_through_the_node_path():
     assert any(row[4] for row in log[n1:n1 + 5]) and not all(row[4] for row in log[n1:])
     momentum = np.array([row[5] for row in log])
     np.testing.assert_allclose(momentum, momentum[0], rtol=1e-12)
+
+
+def test_parameter_changes_keep_the_state():
+    model = load_model()
+    src = DIO.DrivelineSource(model, DrivelineParams(0.5, 1.2, 0.0, 0.0, 30.0, 10.0))
+    src.reset(0.0, 60.0)
+    src.torques.torque_a.offer(100.0)
+    src.sample(0.0, 60.0, 0, 1.0)
+    src.advance(0.01)
+    before = src.state.copy()
+    src.set_driveline(DrivelineParams(2.0, 1.2, 0.0, 0.0, 0.0, 0.0))
+    np.testing.assert_array_equal(src.state, before)            # speeds kept, initial speeds unused
+    drag = src.sample(0.0, 60.0, 10_000_000, 1.0)[K.O_TORQUE]        # open clutch: viscous drag only
+    src.advance(0.01)
+    # side a now accelerates at (100 N m - drag) / 2 kg m^2
+    accel = (src.plant.speed_a_rad_s - before[src.plant.state.size - 3]) / 0.01
+    assert 0.0 < drag < 5.0 and accel == pytest.approx((100.0 - drag) / 2.0, rel=1e-3)
+    src.set_model(model.with_lock_slip(0.01))
+    assert src.plant.speed_a_rad_s == src.state[src.state.size - 3]
+    src.reset(0.0, 60.0)
+    assert src.plant.speed_a_rad_s == 0.0 and src.plant.locked          # new initial speeds at reset
