@@ -26,9 +26,11 @@ Numerics. The slip equation is stiff near lock-up (dT/ds reaches ~1e4 N m s/rad 
 Stribeck knee against J ~ 1 kg m^2), so the speeds take L-stable linearly implicit steps (ROS2,
 Verwer et al. 1999, two stages, W = I - gamma h J with dT/ds >= 0 by a finite difference):
 no overshoot, no chatter at the lock boundary. Both sides see the same T, so the clutch
-cancels exactly in the momentum J_a w_a + J_b w_b. The film and pack temperature are advanced
-after each speed sub-step with kernels.advance (the slip at the sub-step's end held; the heat
-input the trapezoid of the start and end powers). Sub-steps are <= MAX_STEP_S.
+cancels exactly in the momentum J_a w_a + J_b w_b. The film and pack temperature advance with
+kernels.advance between the two ROS2 stages (stage 1 sees the state at the sub-step's start,
+stage 2 the state at its end; the heat input is the trapezoid of the start power and the power
+at the predicted end slip). Sub-steps are <= MAX_STEP_S; a zero crossing of the slip inside a
+sub-step is located (regula falsi on the sub-step length) and the stick test made there.
 
 State vector (float64[N_DL_STATE]): the plant state of kernels (0..6), then w_a, w_b, locked.
 Record (float64[N_DL_OUT]): the plant record of kernels (O_TORQUE = the transmitted torque), then
