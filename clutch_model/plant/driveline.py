@@ -44,7 +44,8 @@ import numpy as np
 from numba import njit
 
 from clutch_model.plant import kernels as K
-from clutch_model.plant import params as P
+
+P = K.P     # the kernel parameter-vector layout, as the kernels import it
 
 # driveline parameter vector
 N_DL_PARAMS = 6
@@ -344,19 +345,23 @@ def run_driveline(p, q, t, force, tau_a, tau_b, sump, energy0):
 
 def _drop_stale_cache() -> None:
     """numba invalidates a cached function only when its own source file changes; these kernels
-    compile the functions of kernels.py into themselves, so their cache entries older than
-    kernels.py (or params.py) are removed here and recompiled on first use."""
+    compile the functions of kernels.py (and what it imports from clutch_model.plant) into
+    themselves, so their cache entries older than any other module of clutch_model.plant are
+    removed here and recompiled on first use."""
     import os
+    from pathlib import Path
 
     try:
         cache_dir = sample._cache._cache_path
-        newest_dependency = max(os.stat(K.__file__).st_mtime, os.stat(P.__file__).st_mtime)
+        here = Path(__file__).resolve()
+        newest_dependency = max(f.stat().st_mtime for f in here.parent.rglob("*.py")
+                                if not f.name.startswith("driveline"))
         for name in os.listdir(cache_dir):
             if name.startswith("driveline.") and name.endswith((".nbi", ".nbc")):
                 path = os.path.join(cache_dir, name)
                 if os.stat(path).st_mtime < newest_dependency:
                     os.remove(path)
-    except (AttributeError, OSError):
+    except (AttributeError, OSError, ValueError):
         pass   # no cache configured, or another process got there first
 
 
