@@ -18,6 +18,8 @@ _LAZY = {
     "BatchResult": "clutch_model.plant.simulate", "simulate": "clutch_model.plant.simulate",
     "simulate_batch": "clutch_model.plant.simulate",
     "predict_measured_torque": "clutch_model.plant.simulate",
+    "DrivelineParams": "clutch_model.plant.driveline_sim", "DrivelinePlant": "clutch_model.plant.driveline_sim",
+    "DrivelineResult": "clutch_model.plant.driveline_sim", "simulate_driveline": "clutch_model.plant.driveline_sim",
 }
 
 __all__ = ["ClutchSimError", "DataError", "FitError", "ParamsError", *_LAZY]

@@ -12,7 +12,7 @@ import importlib
 import sys
 
 COMMANDS = ["replay", "synth", "fit_friction", "fit_thermal", "calibrate", "montecarlo",
-            "sensitivity", "diagnose", "play", "record"]
+            "sensitivity", "diagnose", "play", "record", "driveline"]
 
 
 def add_params_option(parser: argparse.ArgumentParser) -> None:
