@@ -72,7 +72,7 @@ def test_montecarlo_cli(files, capsys):
     rc = main(["montecarlo", "--bags", *bags[:2], "--samples", "64", "--spread", "0.05", "--seed", "1",
                "--out", str(out), "--chunk-size", "32", "--halving", "a3"])
     assert rc == 0
-    for name in ("samples.npz", "refined_model.yaml", "summary.json", "scatter_a0.png", "scatter_all.png"):
+    for name in ("samples.npz", "refined_model.yaml", "summary.json", "scatter.png"):
         assert (out / name).exists(), name
     capsys.readouterr()
     _one_line_error(capsys, main(["montecarlo", "--bags", *bags[:1], "--samples", "4", "--spread", "2",
