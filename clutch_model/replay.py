@@ -7,7 +7,6 @@ while the dissipated energy carries from one run to the next. ``torque_sim`` pre
 """
 from __future__ import annotations
 
-import csv
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -16,6 +15,7 @@ import numpy as np
 
 from clutch_model.plant.params import ClutchModel
 from clutch_model.formats.bag_reader import Campaign
+from clutch_model.formats.table_csv import write_table_csv
 from clutch_model.plant.simulate import SimResult, predict_measured_torque, simulate
 
 
@@ -85,14 +85,8 @@ def write_replay_csv(result: ReplayResult, path) -> Path:
         header.append("torque_measured")
     if has_pack:
         header.append("pack_temperature_measured")
-    path.parent.mkdir(parents=True, exist_ok=True)
 
-    def fmt(x):
-        return "" if not np.isfinite(x) else repr(float(x))
-
-    with path.open("w", newline="") as fh:
-        writer = csv.writer(fh)
-        writer.writerow(header)
+    def blocks():
         for r, sl in result.campaign.slices():
             cols = [r.t, result.torque_sim[sl], result.sim.pack_temperature_c[sl]]
             if has_torque:
@@ -100,7 +94,6 @@ def write_replay_csv(result: ReplayResult, path) -> Path:
             if has_pack:
                 cols.append(r.pack_temperature_measured_c if r.pack_temperature_measured_c is not None
                             else np.full(len(r), np.nan))
-            for k in range(len(r)):
-                writer.writerow([r.name] + [fmt(c[k]) for c in cols])
-            fh.flush()
-    return path
+            yield r.name, cols
+
+    return write_table_csv(path, header, blocks())
