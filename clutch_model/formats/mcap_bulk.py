@@ -93,29 +93,53 @@ def _decompress(data: bytes, compression: str, size: int) -> bytes:
 
 
 def _gather(buf: np.ndarray, pos: np.ndarray, dtype: str) -> np.ndarray:
-    """Little-endian scalars of ``dtype`` at byte positions ``pos`` of the uint8 array ``buf``."""
+    """Little-endian scalars of ``dtype`` at byte positions ``pos`` of the uint8 array ``buf``
+    (unaligned: rows of a sliding byte window, one fancy index per value)."""
     width = np.dtype(dtype).itemsize
-    return np.ascontiguousarray(buf[pos[:, None] + np.arange(width)]).view(dtype).ravel()
+    window = np.lib.stride_tricks.as_strided(buf, shape=(max(buf.size - width + 1, 0), width),
+                                             strides=(1, 1), writeable=False)
+    return window[pos].view(dtype).ravel()
 
 
-def _decode_values(buf: np.ndarray, rec: np.ndarray, msgtype: str) -> np.ndarray:
-    """Values of the messages whose records start at offsets ``rec`` (validated layout)."""
-    data = rec + _MSG_PREFIX
-    length = _gather(buf, rec + 1, "<u8").astype(np.int64) - (_MSG_PREFIX - 9)
-    if np.any(buf[data] != CDR_LE[0]) or np.any(buf[data + 1] != CDR_LE[1]):
-        raise NotBulk("not little-endian CDR")
+_PREFIX_FIELDS = [("opcode", "u1"), ("length", "<u8"), ("channel", "<u2"), ("sequence", "<u4"),
+                  ("log_time", "<u8"), ("publish_time", "<u8"), ("encap0", "u1"), ("encap1", "u1"),
+                  ("encap_options", "<u2")]
+FLOAT64_RECORD = np.dtype(_PREFIX_FIELDS + [("data", "<f8")])                       # 43 bytes
+TEMPERATURE_PREFIX = np.dtype(_PREFIX_FIELDS + [("sec", "<i4"), ("nanosec", "<u4"),
+                                                ("frame_id_len", "<u4")])           # 47 bytes
+
+
+def _records(buf: np.ndarray, rec: np.ndarray, dtype: np.dtype) -> np.ndarray:
+    """The records at offsets ``rec`` read as the packed structured ``dtype`` (one gather)."""
+    width = dtype.itemsize
+    if rec.size and rec[-1] + width > buf.size:
+        raise NotBulk("record runs past the chunk")
+    window = np.lib.stride_tricks.as_strided(buf, shape=(max(buf.size - width + 1, 0), width),
+                                             strides=(1, 1), writeable=False)
+    return window[rec].view(dtype).ravel()
+
+
+def _decode(buf: np.ndarray, rec: np.ndarray, cid: int, msgtype: str) -> tuple[np.ndarray, np.ndarray]:
+    """(log times, values) of channel ``cid``'s messages whose records start at the ascending
+    offsets ``rec``; every record's opcode, channel, length and CDR header checked."""
+    head = _records(buf, rec, FLOAT64_RECORD if msgtype == FLOAT64 else TEMPERATURE_PREFIX)
+    if (np.any(head["opcode"] != MESSAGE_OPCODE) or np.any(head["channel"] != cid)
+            or np.any(head["encap0"] != CDR_LE[0]) or np.any(head["encap1"] != CDR_LE[1])):
+        raise NotBulk("message index does not point at this channel's little-endian CDR messages")
+    data_len = head["length"].astype(np.int64) - (_MSG_PREFIX - 9)
+    log_time = head["log_time"].astype(np.int64)
     if msgtype == FLOAT64:
-        if np.any(length != 12):
+        if np.any(data_len != 12):
             raise NotBulk("Float64 record of unexpected length")
-        return _gather(buf, data + 4, "<f8")
-    # Temperature: payload = data + 4; frame_id length at payload + 8
-    if np.any(length < 4 + 12 + 16):
-        raise NotBulk("Temperature record too short")
-    str_len = _gather(buf, data + 12, "<u4").astype(np.int64)
-    value_at = ((12 + str_len + 7) // 8) * 8      # in the payload, aligned to 8
-    if np.any(length != 4 + value_at + 16):
+        return log_time, head["data"].astype(np.float64)
+    # Temperature: payload (after the 4-byte encapsulation) = stamp, frame_id, pad to 8, values
+    value_at = ((12 + head["frame_id_len"].astype(np.int64) + 7) // 8) * 8
+    if np.any(data_len != 4 + value_at + 16):
         raise NotBulk("Temperature record of unexpected length")
-    return _gather(buf, data + 4 + value_at, "<f8")
+    value_pos = rec + _MSG_PREFIX + 4 + value_at
+    if value_pos[-1] + 8 > buf.size or np.any(value_pos + 8 > buf.size):
+        raise NotBulk("Temperature record runs past the chunk")
+    return log_time, _gather(buf, value_pos, "<f8")
 
 
 def read_scalar_topics(path, wanted) -> tuple[dict, int] | None:
@@ -127,7 +151,7 @@ def read_scalar_topics(path, wanted) -> tuple[dict, int] | None:
         return None
     try:
         return _read(f, set(wanted))
-    except NotBulk:
+    except (NotBulk, IndexError):
         return None
 
 
@@ -187,15 +211,13 @@ def _read(f: Path, wanted: set) -> tuple[dict, int]:
                 rec = entries[1::2].astype(np.int64)
                 if rec.size == 0:
                     continue
-                if rec.min() < 0 or rec.max() + _MSG_PREFIX > buf.size:
+                if not np.all(rec[1:] > rec[:-1]):
+                    rec.sort()
+                if rec[0] < 0:
                     raise NotBulk("message offset outside the chunk")
-                if np.any(buf[rec] != MESSAGE_OPCODE) or np.any(_gather(buf, rec + 9, "<u2") != cid):
-                    raise NotBulk("message index does not point at this channel's messages")
-                rec.sort()
                 topic, msgtype = channels[cid]
-                log_time = _gather(buf, rec + 15, "<u8").astype(np.int64)
-                parts[topic].append((log_time, np.full(rec.size, ci.chunk_start_offset, np.int64), rec,
-                                     _decode_values(buf, rec, msgtype)))
+                log_time, values = _decode(buf, rec, cid, msgtype)
+                parts[topic].append((log_time, np.full(rec.size, ci.chunk_start_offset, np.int64), rec, values))
             del buf, raw
         series = {}
         for topic, items in parts.items():
@@ -205,7 +227,10 @@ def _read(f: Path, wanted: set) -> tuple[dict, int]:
             chunk_at = np.concatenate([p[1] for p in items])
             rec_at = np.concatenate([p[2] for p in items])
             values = np.concatenate([p[3] for p in items])
-            order = np.lexsort((rec_at, chunk_at, times))
-            series[topic] = (times[order], values[order])
+            if np.all(times[1:] >= times[:-1]):        # written in time order: nothing to reorder
+                series[topic] = (times, values)
+            else:
+                order = np.lexsort((rec_at, chunk_at, times))
+                series[topic] = (times[order], values[order])
         first = min(int(stats.message_start_time), min(int(c.message_start_time) for c in chunks))
         return series, first
