@@ -179,13 +179,15 @@ def _read(f: Path, wanted: set) -> tuple[dict, int]:
             channels[cid] = (ch.topic, schema.name)
         parts = {topic: [] for topic, _ in channels.values()}
         chunks = sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset)
-        for ci in chunks:
+        for ordinal, ci in enumerate(chunks):
             mine = [cid for cid in channels if cid in ci.message_index_offsets]
             counts = stats.channel_message_counts
             if not mine:
                 if any(counts.get(cid, 0) for cid in channels) and not ci.message_index_offsets:
                     raise NotBulk("chunk without message index")
                 continue
+            if ci.uncompressed_size >= 1 << 32:
+                raise NotBulk("chunk of 4 GiB or more")
             fh.seek(ci.chunk_start_offset)
             head = fh.read(9 + 8 + 8 + 8 + 4 + 4)
             if len(head) < 41 or head[0] != 0x06:
@@ -217,20 +219,20 @@ def _read(f: Path, wanted: set) -> tuple[dict, int]:
                     raise NotBulk("message offset outside the chunk")
                 topic, msgtype = channels[cid]
                 log_time, values = _decode(buf, rec, cid, msgtype)
-                parts[topic].append((log_time, np.full(rec.size, ci.chunk_start_offset, np.int64), rec, values))
+                parts[topic].append((log_time, rec + (ordinal << 32), values))   # position: chunk, record
             del buf, raw
         series = {}
-        for topic, items in parts.items():
+        for topic, items in list(parts.items()):
             if not items:
                 continue
             times = np.concatenate([p[0] for p in items])
-            chunk_at = np.concatenate([p[1] for p in items])
-            rec_at = np.concatenate([p[2] for p in items])
-            values = np.concatenate([p[3] for p in items])
+            values = np.concatenate([p[2] for p in items])
             if np.all(times[1:] >= times[:-1]):        # written in time order: nothing to reorder
                 series[topic] = (times, values)
             else:
-                order = np.lexsort((rec_at, chunk_at, times))
+                position = np.concatenate([p[1] for p in items])
+                order = np.lexsort((position, times))
                 series[topic] = (times[order], values[order])
+            parts[topic] = None
         first = min(int(stats.message_start_time), min(int(c.message_start_time) for c in chunks))
         return series, first
