@@ -99,16 +99,32 @@ def write_campaign(out: Path, minutes: float, seed: int = 0) -> tuple[list, floa
     return bags, t_write
 
 
+GNU_TIME = Path("/usr/bin/time")
+
+
 def timed_process(cmd: list, env: dict) -> tuple[float, float, int, str]:
-    """(wall s, peak RSS MB, exit code, last output line) of one child process."""
+    """(wall s, peak RSS MB, exit code, last output line) of one child process. Peak memory from
+    /usr/bin/time (the child's own maximum RSS); without it from wait4's ru_maxrss, which can
+    also count the pages a forked child shared with this (large) process before its exec."""
+    stats = None
+    if GNU_TIME.exists():
+        fd, stats = tempfile.mkstemp(suffix=".time")
+        os.close(fd)
+        cmd = [str(GNU_TIME), "-f", "%M", "-o", stats] + cmd
     t0 = time.perf_counter()
     proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     out = proc.stdout.read()
     _, status, usage = os.wait4(proc.pid, 0)
     wall = time.perf_counter() - t0
     proc.returncode = os.waitstatus_to_exitcode(status)
+    rss_mb = usage.ru_maxrss / 1024.0
+    if stats is not None:
+        try:
+            rss_mb = int(Path(stats).read_text().split()[-1]) / 1024.0
+        finally:
+            os.unlink(stats)
     lines = [ln for ln in out.strip().splitlines() if ln.strip()]
-    return wall, usage.ru_maxrss / 1024.0, proc.returncode, (lines[-1] if lines else "")
+    return wall, rss_mb, proc.returncode, (lines[-1] if lines else "")
 
 
 def breakdown(bags, out_csv: Path) -> dict:

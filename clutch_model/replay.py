@@ -74,26 +74,31 @@ def replay_runs(model: ClutchModel, runs, energy0_j: float | None = None) -> Rep
     return ReplayResult(campaign=campaign, sim=sim, torque_sim=torque)
 
 
-def write_replay_csv(result: ReplayResult, path) -> Path:
-    """OUT.csv: bag,t,torque_sim,pack_temperature_sim[,torque_measured][,pack_temperature_measured]."""
-    path = Path(path)
-    runs = result.campaign.runs
-    has_torque = any(r.torque_measured_nm is not None for r in runs)
-    has_pack = any(r.pack_temperature_measured_c is not None for r in runs)
+def replay_csv_header(has_torque: bool, has_pack: bool) -> list:
     header = ["bag", "t", "torque_sim", "pack_temperature_sim"]
     if has_torque:
         header.append("torque_measured")
     if has_pack:
         header.append("pack_temperature_measured")
+    return header
 
-    def blocks():
-        for r, sl in result.campaign.slices():
-            cols = [r.t, result.torque_sim[sl], result.sim.pack_temperature_c[sl]]
-            if has_torque:
-                cols.append(r.torque_measured_nm if r.torque_measured_nm is not None else np.full(len(r), np.nan))
-            if has_pack:
-                cols.append(r.pack_temperature_measured_c if r.pack_temperature_measured_c is not None
-                            else np.full(len(r), np.nan))
-            yield r.name, cols
 
-    return write_table_csv(path, header, blocks())
+def replay_csv_blocks(result: ReplayResult, has_torque: bool, has_pack: bool):
+    """(bag name, columns of replay_csv_header) per run of ``result``."""
+    for r, sl in result.campaign.slices():
+        cols = [r.t, result.torque_sim[sl], result.sim.pack_temperature_c[sl]]
+        if has_torque:
+            cols.append(r.torque_measured_nm if r.torque_measured_nm is not None else np.full(len(r), np.nan))
+        if has_pack:
+            cols.append(r.pack_temperature_measured_c if r.pack_temperature_measured_c is not None
+                        else np.full(len(r), np.nan))
+        yield r.name, cols
+
+
+def write_replay_csv(result: ReplayResult, path) -> Path:
+    """OUT.csv: bag,t,torque_sim,pack_temperature_sim[,torque_measured][,pack_temperature_measured]."""
+    runs = result.campaign.runs
+    has_torque = any(r.torque_measured_nm is not None for r in runs)
+    has_pack = any(r.pack_temperature_measured_c is not None for r in runs)
+    return write_table_csv(path, replay_csv_header(has_torque, has_pack),
+                           replay_csv_blocks(result, has_torque, has_pack))
