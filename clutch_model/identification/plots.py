@@ -32,8 +32,12 @@ def montecarlo_scatter(result, outdir, coefficients=None) -> list:
     A, r = result.samples, result.rmse
     ncol = min(5, len(ks))
     nrow = int(np.ceil(len(ks) / ncol))
-    fig, axes = plt.subplots(nrow, ncol, figsize=(3.0 * ncol + 0.6, 2.4 * nrow + 0.6), squeeze=False)
+    # fixed margins and few ticks: tight_layout and tick layout of 20 axes cost more than the drawing
+    fig, axes = plt.subplots(nrow, ncol, figsize=(3.0 * ncol + 0.6, 2.4 * nrow + 0.6), squeeze=False,
+                             sharey=True)
     for ax, k in zip(axes.ravel(), ks):
+        ax.locator_params(axis="x", nbins=3)
+        ax.locator_params(axis="y", nbins=4)
         if better.any():
             ax.scatter(A[better, k], r[better], s=3, alpha=0.5, color="tab:blue", rasterized=True,
                        linewidths=0)
@@ -50,7 +54,8 @@ def montecarlo_scatter(result, outdir, coefficients=None) -> list:
     fig.suptitle(f"Monte Carlo (+-{pct}): {int(better.sum())} of {result.n_evaluated} samples beat the "
                  f"nominal RMSE {result.rmse_nominal:.2f} N m (dotted); red = their mean, dashed = nominal",
                  fontsize=9)
-    fig.tight_layout(rect=(0, 0, 1, 0.97))
+    fig.subplots_adjust(left=0.06, right=0.99, bottom=0.05, top=1 - 0.75 / fig.get_figheight(),
+                        wspace=0.25, hspace=0.45)
     p = out / "scatter.png"
     fig.savefig(p, dpi=90)
     plt.close(fig)
