@@ -102,15 +102,17 @@ def write_campaign(out: Path, minutes: float, seed: int = 0) -> tuple[list, floa
 GNU_TIME = Path("/usr/bin/time")
 
 
-def timed_process(cmd: list, env: dict) -> tuple[float, float, int, str]:
-    """(wall s, peak RSS MB, exit code, last output line) of one child process. Peak memory from
+def timed_process(cmd: list, env: dict) -> tuple[float, float, float, int, str]:
+    """(wall s, CPU s (user + system), peak RSS MB, exit code, last output line) of one child
+    process. CPU time is the figure to read on a loaded machine (wall time waits for the other
+    jobs' turns). Peak memory and CPU time from
     /usr/bin/time (the child's own maximum RSS); without it from wait4's ru_maxrss, which can
     also count the pages a forked child shared with this (large) process before its exec."""
     stats = None
     if GNU_TIME.exists():
         fd, stats = tempfile.mkstemp(suffix=".time")
         os.close(fd)
-        cmd = [str(GNU_TIME), "-f", "%M", "-o", stats] + cmd
+        cmd = [str(GNU_TIME), "-f", "%M %U %S", "-o", stats] + cmd
     t0 = time.perf_counter()
     proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     out = proc.stdout.read()
@@ -118,13 +120,15 @@ def timed_process(cmd: list, env: dict) -> tuple[float, float, int, str]:
     wall = time.perf_counter() - t0
     proc.returncode = os.waitstatus_to_exitcode(status)
     rss_mb = usage.ru_maxrss / 1024.0
+    cpu = usage.ru_utime + usage.ru_stime
     if stats is not None:
         try:
-            rss_mb = int(Path(stats).read_text().split()[-1]) / 1024.0
+            rss_kb, user, system = Path(stats).read_text().split()[-3:]
+            rss_mb, cpu = int(rss_kb) / 1024.0, float(user) + float(system)
         finally:
             os.unlink(stats)
     lines = [ln for ln in out.strip().splitlines() if ln.strip()]
-    return wall, rss_mb, proc.returncode, (lines[-1] if lines else "")
+    return wall, cpu, rss_mb, proc.returncode, (lines[-1] if lines else "")
 
 
 def breakdown(bags, out_csv: Path) -> dict:
@@ -161,8 +165,8 @@ def main(argv=None) -> int:
                    env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, check=False)
     rows = []
     print(f"clutch-sim replay scaling, 1 kHz campaigns (load avg {load_avg()}, {os.cpu_count()} cores)")
-    print(f"{'minutes':>8} {'runs':>5} {'rows':>10} {'write s':>8} {'replay s':>9} {'x real':>7} "
-          f"{'us/sim s':>9} {'peak MB':>8}")
+    print(f"{'minutes':>8} {'runs':>5} {'rows':>10} {'write s':>8} {'wall s':>7} {'cpu s':>6} {'x real':>7} "
+          f"{'x real cpu':>10} {'ms/sim s':>9} {'peak MB':>8}")
     try:
         for minutes in args.minutes:
             camp = work / f"campaign_{minutes:g}min"
@@ -171,21 +175,23 @@ def main(argv=None) -> int:
             bags, t_write = write_campaign(camp, minutes)
             sim_s = minutes * 60.0
             cmd = exe + ["replay", "--bag", *map(str, bags), "--out", str(camp / "replay.csv")]
-            wall, rss, rc, last = timed_process(cmd, env)
+            wall, cpu, rss, rc, last = timed_process(cmd, env)
             if rc != 0:
                 print(f"replay failed on {minutes:g} min: {last}")
                 return 1
             n_rows = sum(1 for _ in open(camp / "replay.csv")) - 1
             row = {"minutes": minutes, "runs": len(bags), "rows": n_rows, "write_s": t_write, "replay_s": wall,
-                   "x_real_time": sim_s / wall, "ms_per_sim_s": 1e3 * wall / sim_s, "peak_mb": rss}
-            print(f"{minutes:8g} {len(bags):5d} {n_rows:10d} {t_write:8.1f} {wall:9.2f} {sim_s / wall:7.0f} "
-                  f"{1e6 * wall / sim_s:9.0f} {rss:8.0f}", flush=True)
+                   "replay_cpu_s": cpu, "x_real_time": sim_s / wall, "ms_per_sim_s": 1e3 * wall / sim_s,
+                   "peak_mb": rss}
+            print(f"{minutes:8g} {len(bags):5d} {n_rows:10d} {t_write:8.1f} {wall:7.2f} {cpu:6.2f} "
+                  f"{sim_s / wall:7.0f} {sim_s / cpu:10.0f} {1e3 * wall / sim_s:9.2f} {rss:8.0f}  (load {load_avg()})",
+                  flush=True)
             if args.diagnose:
                 dcmd = exe + ["diagnose", "--bench", str(ROOT / "bags" / "bench.csv"), "--bags", *map(str, bags),
                               "--out", str(camp / "diagnose")] + DIAGNOSE_ARGS
-                dwall, drss, drc, dlast = timed_process(dcmd, env)
-                row.update({"diagnose_s": dwall, "diagnose_peak_mb": drss, "diagnose_rc": drc})
-                print(f"{'':8} diagnose: {dwall:.1f} s, {1e3 * dwall / sim_s:.1f} ms per simulated s, "
+                dwall, dcpu, drss, drc, dlast = timed_process(dcmd, env)
+                row.update({"diagnose_s": dwall, "diagnose_cpu_s": dcpu, "diagnose_peak_mb": drss, "diagnose_rc": drc})
+                print(f"{'':8} diagnose: {dwall:.1f} s (cpu {dcpu:.1f} s), {1e3 * dwall / sim_s:.1f} ms per simulated s, "
                       f"peak {drss:.0f} MB" + ("" if drc == 0 else f" (failed: {dlast})"), flush=True)
             rows.append(row)
             if minutes == min(args.minutes):

@@ -169,6 +169,8 @@ def _valid(topic_kind: str, values: np.ndarray) -> np.ndarray:
 
 def _latest(times: np.ndarray, values: np.ndarray, at: np.ndarray) -> np.ndarray:
     idx = np.searchsorted(times, at, side="right") - 1
+    if not idx.size or idx.min() >= 0:           # the usual case: every row has a sample before it
+        return values.take(idx)
     out = np.full(at.size, np.nan)
     ok = idx >= 0
     out[ok] = values[idx[ok]]
@@ -191,10 +193,11 @@ def read_bag(path, topics: TopicNames = TopicNames(), bulk: bool = True) -> Run:
             raise DataError(f"bag {name}: missing topic {topic}")
         times, values = series[topic]
         ok = _valid(kind, values)
-        rejected += int((~ok).sum())
-        if not ok.any():
+        n_ok = int(np.count_nonzero(ok))
+        rejected += ok.size - n_ok
+        if not n_ok:
             raise DataError(f"bag {name}: topic {topic} has no valid samples")
-        inputs[kind] = (times[ok], values[ok])
+        inputs[kind] = (times, values) if n_ok == ok.size else (times[ok], values[ok])
     t0_inputs = max(inputs[k][0][0] for k in inputs)
     rows = inputs["force"][0]
     rows = rows[rows >= t0_inputs]

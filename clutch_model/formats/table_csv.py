@@ -37,8 +37,11 @@ def _block_orjson(orjson, prefix: bytes, cols: list, a: int, b: int) -> bytes:
     """Rows a:b as CSV bytes (trailing EOL included)."""
     floats = [c for c in cols if c.dtype.kind == "f"]
     if len(floats) == len(cols):
-        body = orjson.dumps(np.column_stack([c[a:b] for c in cols]), option=orjson.OPT_SERIALIZE_NUMPY)
-        body = body[2:-2].replace(b"null", b"").replace(b"],[", EOL.encode() + prefix)
+        block = np.column_stack([c[a:b] for c in cols])
+        body = orjson.dumps(block, option=orjson.OPT_SERIALIZE_NUMPY)[2:-2]
+        if not np.isfinite(block).all():
+            body = body.replace(b"null", b"")
+        body = body.replace(b"],[", EOL.encode() + prefix)
         return prefix + body + EOL.encode()
     # mixed kinds (integer flags): each column formatted alone, rows joined
     parts = []
