@@ -107,17 +107,19 @@ def replay_bags(model: ClutchModel, paths, out_csv, topics: TopicNames = TopicNa
                 rp = out.pack.add(res.sim.pack_temperature_c, run.pack_temperature_measured_c)
             out.per_run.append((run.name, rt, rp, len(run)))
             yield from replay_csv_blocks(res, has_torque, has_pack)
+            del run, res                     # before the next bag is read: one bag in memory at a time
             if bar is not None:
                 bar.update(1)
 
     try:
         it = blocks()
-        first = next(it, None)               # the first bag read before OUT.csv is opened (a bad
-                                             # first bag writes nothing; later ones keep what was written)
+        # the first bag is read before OUT.csv is opened (a bad first bag writes nothing; a bad
+        # later one keeps what was written)
+        first = [b for b in [next(it, None)] if b is not None]
 
         def chained():
-            if first is not None:
-                yield first
+            while first:
+                yield first.pop()            # not kept referenced once written
             yield from it
 
         write_table_csv(out_csv, replay_csv_header(has_torque, has_pack), chained())

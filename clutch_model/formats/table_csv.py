@@ -85,4 +85,5 @@ def write_table_csv(path, header: list, blocks) -> Path:
                 else:
                     fh.write(_block_python(prefix, cols, a, b).encode())
             fh.flush()
+            del cols                                # free this block's arrays before the next is made
     return path
