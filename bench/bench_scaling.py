@@ -9,7 +9,8 @@ engagement profiles, the measured torque = RC-1's torque + noise — then runs
 time. Process start-up (imports, numba cache load) is included, as a user sees it; the
 in-process breakdown (decode / simulate / CSV) is printed for the shortest campaign.
 
-Usage: python bench/bench_scaling.py [--minutes 1 10 60] [--workdir DIR] [--keep] [--diagnose]
+Usage: python bench/bench_scaling.py [--minutes 1 10 60] [--run-minutes 10] [--workdir DIR] [--keep]
+       [--diagnose]
 `--diagnose` also times `clutch-sim diagnose` the same way (hook: the diagnosis' own scaling
 work decides its options; see DIAGNOSE_ARGS). Figures are upper bounds on a shared machine:
 the load average is printed with them.
@@ -66,15 +67,16 @@ def run_inputs(duration_s: float, seed: int):
     return t, force, slip, sump
 
 
-def write_campaign(out: Path, minutes: float, seed: int = 0) -> tuple[list, float]:
-    """Write the campaign's bags; returns (bag paths, seconds spent writing)."""
+def write_campaign(out: Path, minutes: float, seed: int = 0, run_max_s: float = RUN_MAX_S) -> tuple[list, float]:
+    """Write the campaign's bags (runs of at most ``run_max_s``); returns (bag paths, seconds
+    spent writing)."""
     from clutch_model.formats.bag_writer import RunSignals, TopicSeries, write_run_bag
     from clutch_model.plant.params import load_model
     from clutch_model.plant.simulate import simulate
 
     model = load_model(None)
     total_s = minutes * 60.0
-    n_runs = max(1, int(np.ceil(total_s / RUN_MAX_S)))
+    n_runs = max(1, int(np.ceil(total_s / run_max_s - 1e-9)))
     run_s = total_s / n_runs
     out.mkdir(parents=True, exist_ok=True)
     bags, t_write = [], 0.0
@@ -152,6 +154,8 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--minutes", type=float, nargs="+", default=[1.0, 10.0, 60.0])
     ap.add_argument("--workdir", default=None, help="where to write the campaigns (default: a temp dir)")
+    ap.add_argument("--run-minutes", type=float, default=RUN_MAX_S / 60.0,
+                    help="longest bag of a campaign (default %(default)g min; 60 = one bag per hour)")
     ap.add_argument("--keep", action="store_true", help="keep the campaigns and outputs")
     ap.add_argument("--diagnose", action="store_true", help="also time `clutch-sim diagnose` on each campaign")
     args = ap.parse_args(argv)
@@ -172,7 +176,7 @@ def main(argv=None) -> int:
             camp = work / f"campaign_{minutes:g}min"
             if camp.exists():
                 shutil.rmtree(camp)
-            bags, t_write = write_campaign(camp, minutes)
+            bags, t_write = write_campaign(camp, minutes, run_max_s=60.0 * args.run_minutes)
             sim_s = minutes * 60.0
             cmd = exe + ["replay", "--bag", *map(str, bags), "--out", str(camp / "replay.csv")]
             wall, cpu, rss, rc, last = timed_process(cmd, env)
