@@ -61,11 +61,16 @@ class StreamedReplay:
 
 def bag_header(path) -> tuple[int, set]:
     """(log time of the bag's first message, topics with messages) from the bag's index."""
-    from rosbags.highlevel import AnyReader
+    from clutch_model.formats.mcap_bulk import mcap_header
 
     path = Path(path)
     if not path.exists():
         raise DataError(f"bag not found: {path}")
+    got = mcap_header(path)
+    if got is not None:
+        return got
+    from rosbags.highlevel import AnyReader
+
     try:
         with AnyReader([path]) as reader:
             return int(reader.start_time), {c.topic for c in reader.connections if c.msgcount > 0}

@@ -114,9 +114,6 @@ def _read_topics(path: Path, wanted: list, bulk: bool = True) -> tuple[dict, int
     bag's first log time. MCAP bags of Float64/Temperature topics are decoded in bulk
     (``mcap_bulk``, the same numbers); anything else, or ``bulk=False``, one message at a time
     with rosbags."""
-    from rosbags.highlevel import AnyReader
-    from rosbags.rosbag2 import ReaderError
-
     if not path.exists():
         raise DataError(f"bag not found: {path}")
     if bulk:
@@ -125,6 +122,8 @@ def _read_topics(path: Path, wanted: list, bulk: bool = True) -> tuple[dict, int
         got = read_scalar_topics(path, wanted)
         if got is not None:
             return got
+    from rosbags.highlevel import AnyReader
+    from rosbags.rosbag2 import ReaderError
     try:
         with AnyReader([path]) as reader:
             conns = [c for c in reader.connections if c.topic in wanted]

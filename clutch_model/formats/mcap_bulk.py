@@ -236,3 +236,24 @@ def _read(f: Path, wanted: set) -> tuple[dict, int]:
             parts[topic] = None
         first = min(int(stats.message_start_time), min(int(c.message_start_time) for c in chunks))
         return series, first
+
+
+def mcap_header(path) -> tuple[int, set] | None:
+    """(log time of the first message, topics with messages) from an MCAP bag's summary, or
+    None (not a single-file MCAP bag with statistics: ask rosbags)."""
+    f = mcap_file_of(Path(path))
+    if f is None:
+        return None
+    from mcap.exceptions import McapError
+    from mcap.reader import SeekingReader
+
+    try:
+        with f.open("rb") as fh:
+            summary = SeekingReader(fh).get_summary()
+    except (McapError, struct.error, ValueError, EOFError, OSError):
+        return None
+    if summary is None or summary.statistics is None or not summary.statistics.message_count:
+        return None
+    counts = summary.statistics.channel_message_counts
+    topics = {ch.topic for cid, ch in summary.channels.items() if counts.get(cid, 0) > 0}
+    return int(summary.statistics.message_start_time), topics

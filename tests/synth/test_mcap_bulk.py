@@ -200,3 +200,19 @@ def test_messages_out_of_log_time_order(tmp_path):
     _same_series(bulk, _read_topics(path, WANTED, bulk=False))
     assert np.all(np.diff(bulk[0][T.applied_force][0]) >= 0)
     _same_run(read_bag(path), read_bag(path, bulk=False))
+
+
+def test_mcap_header_equals_rosbags(long_bags):
+    from rosbags.highlevel import AnyReader
+
+    from clutch_model.formats.mcap_bulk import mcap_header
+
+    for kind in ("mcap", "lz4", "bare"):
+        with AnyReader([long_bags[kind]]) as reader:
+            expected = int(reader.start_time), {c.topic for c in reader.connections if c.msgcount > 0}
+        assert mcap_header(long_bags[kind]) == expected
+    assert mcap_header(long_bags["sqlite3"]) is None
+    for name in ("run_00", "run_02"):                     # run_02 logs no pack temperature
+        with AnyReader([SAMPLES / name]) as reader:
+            expected = int(reader.start_time), {c.topic for c in reader.connections if c.msgcount > 0}
+        assert mcap_header(SAMPLES / name) == expected
