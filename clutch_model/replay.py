@@ -75,12 +75,14 @@ def replay_runs(model: ClutchModel, runs, energy0_j: float | None = None) -> Rep
 
 
 def write_replay_csv(result: ReplayResult, path) -> Path:
-    """OUT.csv: bag,t,torque_sim,pack_temperature_sim[,torque_measured][,pack_temperature_measured]."""
+    """OUT.csv: bag,t,torque_sim,pack_temperature_sim,locked[,torque_measured][,pack_temperature_measured].
+
+    ``locked`` is 1 where the model reports the static capacity (|slip| < lock_slip_rad_s)."""
     path = Path(path)
     runs = result.campaign.runs
     has_torque = any(r.torque_measured_nm is not None for r in runs)
     has_pack = any(r.pack_temperature_measured_c is not None for r in runs)
-    header = ["bag", "t", "torque_sim", "pack_temperature_sim"]
+    header = ["bag", "t", "torque_sim", "pack_temperature_sim", "locked"]
     if has_torque:
         header.append("torque_measured")
     if has_pack:
@@ -88,13 +90,16 @@ def write_replay_csv(result: ReplayResult, path) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
 
     def fmt(x):
+        if isinstance(x, (int, np.integer)):
+            return str(int(x))
         return "" if not np.isfinite(x) else repr(float(x))
 
     with path.open("w", newline="") as fh:
         writer = csv.writer(fh)
         writer.writerow(header)
         for r, sl in result.campaign.slices():
-            cols = [r.t, result.torque_sim[sl], result.sim.pack_temperature_c[sl]]
+            cols = [r.t, result.torque_sim[sl], result.sim.pack_temperature_c[sl],
+                    result.sim.locked[sl].astype(int)]
             if has_torque:
                 cols.append(r.torque_measured_nm if r.torque_measured_nm is not None else np.full(len(r), np.nan))
             if has_pack:
