@@ -496,7 +496,8 @@ def synthesize_car_logs(spec: CarLogSpec | None = None, base_model: ClutchModel 
         fine = {"t_s": t_run.copy(), "applied_force_n": force_all[sl], "slip_speed_rad_s": slip_all[sl],
                 "sump_temperature_c": sump_all[sl], "torque_nm": transmitted[sl],
                 "sensor_torque_nm": sensor[sl], "pack_temperature_c": plant["pack"][sl],
-                "locked": locked[sl], "plant_locked": plant["locked"][sl]}
+                "locked": locked[sl], "plant_locked": plant["locked"][sl],
+                "static_capacity_nm": np.where(plant["locked"][sl], plant["torque"][sl], np.nan)}
         clean_fine = {"applied_force": force_all[sl], "slip_speed": slip_all[sl],
                       "sump_temperature": sump_all[sl], "measured_torque": sensor[sl],
                       "pack_temperature": plant["pack"][sl]}
@@ -608,8 +609,10 @@ def truth_sidecar_arrays(run: CarLogRun) -> dict:
     slip_t_s, slip_true_rad_s, slip_noise_rad_s, slip_locked   the same for the slip topic
     force_t_s, force_true_n      the applied-force topic's stamps and noise-free values
     fine_t_s, fine_applied_force_n, fine_slip_speed_rad_s, fine_sump_temperature_c,
-    fine_torque_nm, fine_sensor_torque_nm, fine_pack_temperature_c, fine_locked
-                        the fine simulation grid (s from the bag's first message)
+    fine_torque_nm, fine_sensor_torque_nm, fine_pack_temperature_c, fine_locked,
+    fine_plant_locked, fine_static_capacity_nm (NaN while slipping)
+                        the fine simulation grid (s from the bag's first message); fine_torque_nm
+                        is the transmitted torque (the driveline's while locked)
     """
     t0 = run.first_stamp_s
     fine = run.fine
