@@ -1,0 +1,152 @@
+"""Lock-up found from noisy slip data; the model compared where the measurement is."""
+import csv
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from clutch_model.diagnosis.lockup import detect_lockup, detect_lockup_run
+from clutch_model.diagnosis.measured_time import (at_measured_times, interpolate_on_grid,
+                                                  replay_at_measured_times, simulate_at_measured_times)
+from clutch_model.plant import kernels as K
+from clutch_model.plant.params import load_model
+from clutch_model.plant.simulate import simulate
+from clutch_model.virtual_car.car_logs import load_truth_sidecar
+from clutch_model.virtual_car.signals import make_noise
+from tests.virtual_car.conftest import make_campaign
+
+
+def sidecar(paths, name):
+    return load_truth_sidecar(Path(paths["truth"]).parent / "truth" / f"{name}.npz")
+
+
+def precision_recall(paths, runs, **options):
+    tp = fp = fn = 0
+    for run in runs:
+        side = sidecar(paths, run.name)
+        det = detect_lockup_run(run, **options).at(side["slip_t_s"])
+        true = side["slip_locked"]
+        tp += int(np.sum(det & true)); fp += int(np.sum(det & ~true)); fn += int(np.sum(~det & true))
+    return tp / max(tp + fp, 1), tp / max(tp + fn, 1), tp + fn
+
+
+def test_kernel_lock_reports_static_capacity_with_last_sign(tmp_path):
+    """CONTRACT Lock-up: |slip| < lock tolerance -> static capacity (asperity torque with
+    mu_f at w = 0, no hydrodynamic part), sign of the last slip above the tolerance."""
+    model = load_model(None)
+    t = np.arange(0, 2.0, 0.005)
+    slip = np.where(t < 1.0, -3.0, 0.0)
+    force = np.full(t.size, 5000.0)
+    sim = simulate(model, t, force, slip, 60.0)
+    locked = t >= 1.0
+    np.testing.assert_array_equal(sim.locked, locked)
+    p = model.vector()
+    mu0 = np.array([K.friction_coefficient(0.0, pr, th, p) for pr, th in
+                    zip(sim.pressure_mpa[locked], sim.pack_temperature_c[locked])])
+    np.testing.assert_allclose(sim.friction_coefficient[locked], mu0, rtol=1e-12)
+    assert np.all(sim.hydrodynamic_torque_nm[locked] == 0)
+    assert np.all(sim.torque_nm[locked] < 0)                     # sign of the last slip (-3)
+    np.testing.assert_allclose(sim.torque_nm[locked], sim.asperity_torque_nm[locked])
+    # and replay writes the contract's locked column
+    from clutch_model.formats.bag_writer import write_run_bag
+    from clutch_sim.cli import main
+    write_run_bag(tmp_path / "b", {"applied_force": (t, force), "slip_speed": (t, slip),
+                                   "sump_temperature": (t, np.full(t.size, 60.0))})
+    assert main(["replay", "--bag", str(tmp_path / "b"), "--out", str(tmp_path / "o.csv")]) == 0
+    rows = list(csv.DictReader((tmp_path / "o.csv").open()))
+    np.testing.assert_array_equal([int(r["locked"]) for r in rows], locked.astype(int))
+
+
+def test_lock_detection_on_car_logs(short_campaign):
+    _, paths, runs = short_campaign
+    prec, rec, n = precision_recall(paths, runs)
+    assert n > 300
+    assert prec >= 0.85 and rec >= 0.95, (prec, rec)
+    # the noise estimate is the slip sensor's (0.05 rad/s white)
+    sig = [detect_lockup_run(r).noise_sigma_rad_s for r in runs]
+    assert np.allclose(sig, 0.05, rtol=0.25)
+
+
+def test_lock_detection_coloured_slip_noise_long_runs(tmp_path_factory):
+    _, paths, runs = make_campaign(tmp_path_factory, "lock_ar1", seed=31, schedule="few-long",
+                                   run_duration_s=40.0,
+                                   noise={"slip_speed": make_noise("ar1", 0.08, phi=0.9)})
+    prec, rec, n = precision_recall(paths, runs)
+    assert n > 300
+    assert prec >= 0.85 and rec >= 0.95, (prec, rec)
+    sig = [detect_lockup_run(r).noise_sigma_rad_s for r in runs]
+    assert np.allclose(sig, 0.08, rtol=0.3)     # full std, though differences see ~0.45 of it
+
+
+def test_no_lock_where_there_is_none(tmp_path_factory):
+    _, paths, runs = make_campaign(tmp_path_factory, "nolock", seed=32, n_runs=3, lockup=False)
+    for run in runs:
+        assert detect_lockup_run(run).mask.mean() < 0.005
+    # a slipping clutch crossing zero quickly is not locked
+    rng = np.random.default_rng(0)
+    t = np.arange(0, 20, 0.01)
+    w = 5 * np.sin(2 * np.pi * 0.5 * t) + rng.normal(0, 0.05, t.size)
+    assert not detect_lockup(t, w).mask.any()
+
+
+def test_interpolate_on_grid():
+    tg = np.array([0.0, 0.1, 0.25, 0.3])
+    y = 3 * tg + 1
+    q = np.array([-0.01, 0.0, 0.05, 0.2, 0.3, 0.31])
+    out = interpolate_on_grid(tg, y, q)
+    assert np.isnan(out[0]) and np.isnan(out[-1])
+    np.testing.assert_allclose(out[1:-1], 3 * q[1:-1] + 1)
+
+
+def sse_by_lag(t_meas, meas, t_grid, model_grid, keep, lags_ms):
+    """Sum of squared residuals of meas(t) against model(t - lag), over common samples."""
+    shifted = [interpolate_on_grid(t_grid, model_grid, t_meas - lag * 1e-3) for lag in lags_ms]
+    ok = keep & np.all(np.isfinite(shifted), axis=0)
+    return np.array([np.sum((meas[ok] - m[ok]) ** 2) for m in shifted])
+
+
+def test_measured_time_removes_the_apparent_delay(short_campaign):
+    """No mechanism; torque at 50 Hz, force at 200 Hz jittered +-1 ms, slip at 100 Hz. Simulated
+    where the measurement is (linear input hold, output at the torque's own stamps) the
+    residual is best aligned at lag 0; the replay grid's held inputs make the model ~2.5 ms
+    late; the measured torque held on the force grid (the replay CSV's column) looks ~10 ms
+    late."""
+    result, paths, runs = short_campaign
+    assert result.spec.clocks["measured_torque"].rate_hz == 50 and not result.spec.mechanisms
+    model = load_model(paths["truth_model"])
+    mts = simulate_at_measured_times(model, runs)
+    res, cmp_grid = replay_at_measured_times(model, runs)
+    lags = np.arange(-20, 20.5, 0.5)
+    sse_meas = sse_zoh = sse_held = 0.0
+    for j, (run, sl) in enumerate(res.campaign.slices()):
+        lock = detect_lockup_run(run)
+        cmp = mts.comparison
+        ms = cmp.run_slice(j)
+        keep = ~lock.at(cmp.t[ms], pad_s=0.1)
+        rows = mts.run_index == j
+        sse_meas = sse_meas + sse_by_lag(cmp.t[ms], cmp.measured[ms], mts.t[rows], mts.torque_pred[rows], keep, lags)
+        sse_zoh = sse_zoh + sse_by_lag(cmp.t[ms], cmp.measured[ms], run.t, res.torque_sim[sl], keep, lags)
+        keep_g = ~lock.at(run.t, pad_s=0.1) & np.isfinite(run.torque_measured_nm)
+        sse_held = sse_held + sse_by_lag(run.t, run.torque_measured_nm, run.t, res.torque_sim[sl], keep_g, lags)
+        # against the noise-free truth at the same stamps, off lock: the true model is close
+        side = sidecar(paths, run.name)
+        ok = cmp.valid[ms] & keep
+        err = cmp.model[ms][ok] - side["torque_true_nm"][ok]
+        assert np.sqrt(np.mean(err ** 2)) < 8.0
+        assert ok.mean() > 0.5
+    best_meas, best_zoh, best_held = (float(lags[np.argmin(x)]) for x in (sse_meas, sse_zoh, sse_held))
+    print("best lags (ms): measured-time", best_meas, "replay grid", best_zoh, "held", best_held)
+    assert abs(best_meas) <= 0.5
+    assert best_held >= 5.0
+    assert best_zoh <= -1.5      # the replay grid's input hold (half a period), seen as a delay
+
+
+def test_at_measured_times_matches_replay_rows_when_aligned(short_campaign):
+    """Queried exactly at grid rows, the evaluation returns the rows' values."""
+    result, paths, runs = short_campaign
+    res, _ = replay_at_measured_times(load_model(paths["truth_model"]), runs)
+    run, sl = next(res.campaign.slices())
+    vals = interpolate_on_grid(run.t, res.torque_sim[sl], run.t)
+    np.testing.assert_allclose(vals, res.torque_sim[sl])
+    cmp = at_measured_times(res.campaign, res.torque_sim)
+    assert cmp.t.size == sum(r.torque_measured_t.size for r in res.campaign.runs)
