@@ -104,82 +104,110 @@ def _run_grid(run, rate_hz):
         t_end = max(t_end, float(tq[-1]))
     fine = t0 + np.arange(int(np.floor((t_end - t0) * rate_hz)) + 1) / rate_hz
     stamps = tq[(tq >= t0) & (tq <= t_end)] if tq is not None else np.zeros(0)
-    grid = np.union1d(fine, stamps)
-    return grid
+    return np.union1d(fine, stamps)
 
 
 @dataclass
-class MeasuredTimeSimulation:
-    """The campaign simulated on measured-time grids (see ``simulate_at_measured_times``)."""
+class MeasuredTimeGrid:
+    """A campaign's simulation grid for comparing where the measurement is: per run a
+    ``rate_hz`` grid from the run's first replay row joined with its torque stamps, inputs
+    linearly interpolated between their own samples (held after the last one); runs
+    concatenated in log-time order. Feed ``t, force, slip, sump, run_start`` to
+    ``simulate`` / ``simulate_batch``; ``torque_rows`` picks the rows of the torque samples."""
 
-    t: np.ndarray             # grid times, s from each run's bag start, runs concatenated
+    names: list
+    t: np.ndarray
+    force: np.ndarray
+    slip: np.ndarray
+    sump: np.ndarray
     run_start: np.ndarray
-    run_index: np.ndarray
-    sim: object               # plant.simulate.SimResult on that grid
-    torque_pred: np.ndarray   # predicted measured torque (measurement mechanisms applied)
-    comparison: MeasuredComparison   # at the torque stamps (exact grid rows)
-    torque_rows: np.ndarray   # grid row of each comparison sample (-1 where invalid)
+    run_index: np.ndarray        # run of each grid row
+    torque_run: np.ndarray       # run of each torque sample
+    torque_t: np.ndarray         # stamp of each torque sample, s from its bag start
+    torque_measured: np.ndarray  # the measured torque samples
+    torque_rows: np.ndarray      # grid row of each torque sample (-1: before the run's first row)
+    start_time_ns: int = 0       # the first run's start (for the model's energy history)
 
     def at_torque_stamps(self, values) -> np.ndarray:
-        """Any per-grid-row signal (e.g. sim.locked, sim.pack_temperature_c) at the torque stamps."""
+        """A per-grid-row signal (1-D, or (n_sets, n_rows)) at the torque samples; NaN (or
+        False for booleans) where a torque sample has no row."""
         values = np.asarray(values)
-        out = np.full(self.torque_rows.size, np.nan) if values.dtype != bool else \
-            np.zeros(self.torque_rows.size, bool)
         ok = self.torque_rows >= 0
-        out[ok] = values[self.torque_rows[ok]]
-        return out
+        rows = np.maximum(self.torque_rows, 0)
+        picked = values[..., rows]
+        if values.dtype == bool:
+            return picked & ok
+        return np.where(ok, picked, np.nan)
+
+    def comparison(self, y_grid) -> MeasuredComparison:
+        model = self.at_torque_stamps(np.asarray(y_grid, float))
+        return MeasuredComparison(self.names, self.torque_run, self.torque_t, model, self.torque_measured,
+                                  np.isfinite(model) & np.isfinite(self.torque_measured))
 
 
-def simulate_at_measured_times(model, runs, rate_hz: float = 1000.0, energy0_j=None) -> MeasuredTimeSimulation:
-    """Simulate runs (a Campaign or list of Run, with their own samples as read by
-    bag_reader) with linearly interpolated inputs on a ``rate_hz`` grid joined with each
-    run's torque stamps; runs in log-time order, the plant restarting at each run and the
-    dissipated energy carried (as replay). Returns the simulation and the comparison with
-    the measured torque at its own stamps."""
+def measured_time_grid(runs, rate_hz: float = 1000.0) -> MeasuredTimeGrid:
+    """Build the measured-time grid of runs (a Campaign or a list of Run as read by
+    bag_reader, which keep every topic's own samples)."""
     from clutch_model.formats.bag_reader import Campaign
-    from clutch_model.plant.simulate import predict_measured_torque, simulate
 
     campaign = runs if isinstance(runs, Campaign) else Campaign(list(runs))
-    if energy0_j is None:
-        energy0_j = model.initial_energy_j(campaign.runs[0].start_time_ns)
     grids, inputs = [], {"applied_force": [], "slip_speed": [], "sump_temperature": []}
-    for run in campaign.runs:
+    tr, tt, tm, rows = [], [], [], []
+    off = 0
+    for j, run in enumerate(campaign.runs):
         g = _run_grid(run, rate_hz)
         grids.append(g)
         for ch in inputs:
             ts, vs = run.samples[ch]
             inputs[ch].append(np.interp(g, ts, vs))
-    t = np.concatenate(grids)
-    sizes = [g.size for g in grids]
-    run_start = np.zeros(t.size, bool)
-    run_index = np.repeat(np.arange(len(grids)), sizes)
-    run_start[np.cumsum([0] + sizes[:-1])] = True
-    sim = simulate(model, t, np.concatenate(inputs["applied_force"]), np.concatenate(inputs["slip_speed"]),
-                   np.concatenate(inputs["sump_temperature"]), run_start=run_start, energy0_j=energy0_j)
-    pred = np.asarray(predict_measured_torque(model, t, sim.torque_nm, run_start), float)
-    parts = {"i": [], "t": [], "m": [], "y": [], "r": []}
-    off = 0
-    for j, (run, g) in enumerate(zip(campaign.runs, grids)):
         tq = run.torque_measured_t
         if tq is not None and tq.size:
-            pos = np.searchsorted(g, tq)
-            inside = (pos < g.size) & (tq >= g[0])
-            pos_c = np.minimum(pos, g.size - 1)
-            hit = inside & (np.abs(g[pos_c] - tq) < 1e-12)
-            rows = np.where(hit, off + pos_c, -1)
-            parts["i"].append(np.full(tq.size, j)); parts["t"].append(tq)
-            parts["m"].append(np.where(hit, pred[np.maximum(rows, 0)], np.nan))
-            parts["y"].append(run.torque_measured_raw_nm); parts["r"].append(rows)
+            pos = np.minimum(np.searchsorted(g, tq), g.size - 1)
+            hit = np.abs(g[pos] - tq) < 1e-12
+            tr.append(np.full(tq.size, j)); tt.append(tq); tm.append(run.torque_measured_raw_nm)
+            rows.append(np.where(hit, off + pos, -1))
         off += g.size
-    cat = np.concatenate
-    if parts["t"]:
-        model_v, meas = cat(parts["m"]), cat(parts["y"])
-        cmp = MeasuredComparison(campaign.names, cat(parts["i"]), cat(parts["t"]), model_v, meas,
-                                 np.isfinite(model_v) & np.isfinite(meas))
-        rows = cat(parts["r"])
-    else:
-        z = np.zeros(0)
-        cmp = MeasuredComparison(campaign.names, z.astype(int), z, z, z, z.astype(bool))
-        rows = z.astype(int)
-    return MeasuredTimeSimulation(t=t, run_start=run_start, run_index=run_index, sim=sim, torque_pred=pred,
-                                  comparison=cmp, torque_rows=rows)
+    sizes = [g.size for g in grids]
+    run_start = np.zeros(off, bool)
+    run_start[np.cumsum([0] + sizes[:-1])] = True
+    cat = (lambda xs, dt=float: np.concatenate(xs) if xs else np.zeros(0, dt))
+    return MeasuredTimeGrid(
+        names=campaign.names, t=np.concatenate(grids), force=np.concatenate(inputs["applied_force"]),
+        slip=np.concatenate(inputs["slip_speed"]), sump=np.concatenate(inputs["sump_temperature"]),
+        run_start=run_start, run_index=np.repeat(np.arange(len(grids)), sizes),
+        torque_run=cat(tr, int), torque_t=cat(tt), torque_measured=cat(tm), torque_rows=cat(rows, int),
+        start_time_ns=int(campaign.runs[0].start_time_ns))
+
+
+@dataclass
+class MeasuredTimeSimulation:
+    """A model simulated on a MeasuredTimeGrid."""
+
+    grid: MeasuredTimeGrid
+    sim: object               # plant.simulate.SimResult on grid.t
+    torque_pred: np.ndarray   # predicted measured torque (measurement mechanisms applied)
+    comparison: MeasuredComparison   # at the torque stamps (exact grid rows)
+
+    @property
+    def t(self):
+        return self.grid.t
+
+    @property
+    def run_index(self):
+        return self.grid.run_index
+
+
+def simulate_at_measured_times(model, runs, rate_hz: float = 1000.0, energy0_j=None,
+                               grid: MeasuredTimeGrid | None = None) -> MeasuredTimeSimulation:
+    """Simulate runs on their measured-time grid (``measured_time_grid``; pass ``grid`` to
+    reuse one): runs in log-time order, the plant restarting at each run and the dissipated
+    energy carried (as replay), measurement mechanisms applied; the comparison with the
+    measured torque sits at the torque's own stamps."""
+    from clutch_model.plant.simulate import predict_measured_torque, simulate
+
+    g = grid if grid is not None else measured_time_grid(runs, rate_hz)
+    if energy0_j is None:
+        energy0_j = model.initial_energy_j(g.start_time_ns)
+    sim = simulate(model, g.t, g.force, g.slip, g.sump, run_start=g.run_start, energy0_j=energy0_j)
+    pred = np.asarray(predict_measured_torque(model, g.t, sim.torque_nm, g.run_start), float)
+    return MeasuredTimeSimulation(grid=g, sim=sim, torque_pred=pred, comparison=g.comparison(pred))

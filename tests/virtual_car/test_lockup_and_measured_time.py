@@ -150,3 +150,32 @@ def test_at_measured_times_matches_replay_rows_when_aligned(short_campaign):
     np.testing.assert_allclose(vals, res.torque_sim[sl])
     cmp = at_measured_times(res.campaign, res.torque_sim)
     assert cmp.t.size == sum(r.torque_measured_t.size for r in res.campaign.runs)
+
+
+def test_measured_time_grid_rows_and_batch(short_campaign):
+    from clutch_model.diagnosis.measured_time import measured_time_grid
+    from clutch_model.plant.simulate import simulate_batch
+    result, paths, runs = short_campaign
+    g = measured_time_grid(runs, rate_hz=500.0)
+    ok = g.torque_rows >= 0
+    assert ok.mean() > 0.97                       # only samples before a run's first row miss
+    np.testing.assert_array_equal(g.t[g.torque_rows[ok]], g.torque_t[ok])
+    assert np.all(g.run_index[g.torque_rows[ok]] == g.torque_run[ok])
+    # inputs: between the two samples around each row, at the linear weight of its time
+    run0 = runs[0]
+    tf, vf = run0.samples["applied_force"]
+    rows0 = g.run_index == 0
+    tg, fg = g.t[rows0], g.force[rows0]
+    k = np.searchsorted(tf, tg, side="right") - 1
+    inside = (k >= 0) & (k < tf.size - 1)
+    k = k[inside]
+    w = (tg[inside] - tf[k]) / (tf[k + 1] - tf[k])
+    assert np.all((w >= 0) & (w <= 1))
+    np.testing.assert_allclose(fg[inside], (1 - w) * vf[k] + w * vf[k + 1], rtol=1e-9, atol=1e-9)
+    model = load_model(paths["truth_model"])
+    one = simulate_at_measured_times(model, runs, grid=g)
+    batch = simulate_batch([model, model], g.t, g.force, g.slip, g.sump, run_start=g.run_start)
+    np.testing.assert_allclose(batch.torque_nm[1], one.sim.torque_nm, rtol=1e-9, atol=1e-9)
+    picked = g.at_torque_stamps(batch.torque_nm)
+    assert picked.shape == (2, g.torque_t.size)
+    np.testing.assert_allclose(picked[0][ok], one.comparison.model[ok])
