@@ -674,6 +674,8 @@ def parse_item(text: str, kind: str) -> dict:
         if name not in MECHANISM_PARAMETER:
             raise ParamsError(f"unknown mechanism '{name}' (known: {', '.join(MECHANISM_PARAMETER)})")
         default = DEFAULT_MAGNITUDE.get(name)
+        if default is None and name == "friction_degradation":
+            default = 2.0e6   # ~ -10 % friction over a default short-runs campaign
         if not val and default is None:
             raise ParamsError(f"mechanism {name} needs a value ({name}=X)")
         entry[MECHANISM_PARAMETER[name]] = float(val) if val else float(default)
