@@ -23,6 +23,7 @@ from clutch_model.errors import DataError
 from clutch_model.plant.params import ClutchModel
 from clutch_model.replay import replay_runs
 from clutch_model.formats.bag_reader import Campaign
+from clutch_model.diagnosis.lockup import without_locked_torque
 from clutch_model.plant.simulate import SimResult
 from clutch_model.diagnosis import features as F
 from clutch_model.diagnosis.fitting import CANDIDATE_IDS, CandidateFit, fit_candidate
@@ -132,6 +133,8 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
     tick = time.perf_counter()
     timings = {}
     campaign = smooth_sump(runs if isinstance(runs, Campaign) else Campaign(list(runs)))
+    # lock-up phases (found from the slip data): the driveline sets the torque there
+    campaign, _lockups = without_locked_torque(campaign)
     names = campaign.names
     if not np.isfinite(campaign.torque_measured).any():
         raise DataError("the bags have no /clutch/measured_torque: nothing to diagnose against")

@@ -113,3 +113,33 @@ def detect_lockup_run(run, **options) -> LockupResult:
     use ``.at(run.t)`` for its grid rows and ``.at(run.torque_measured_t)`` for the torque
     samples."""
     return detect_lockup(run.slip_raw_t, run.slip_raw_rad_s, **options)
+
+
+def campaign_lockup(campaign, **options) -> list:
+    """``LockupResult`` per run of a bag_reader.Campaign (campaign order), from each run's own
+    slip samples when it has them, else from its grid slip."""
+    out = []
+    for run in campaign.runs:
+        if "slip_speed" in getattr(run, "samples", {}):
+            out.append(detect_lockup_run(run, **options))
+        else:
+            out.append(detect_lockup(run.t, run.slip_speed_rad_s, **options))
+    return out
+
+
+def without_locked_torque(campaign, pad_s: float = 0.1, **options):
+    """(campaign with the measured torque set to NaN on grid rows inside a lock phase (widened
+    by ``pad_s``), [LockupResult per run]). While locked the driveline sets the torque, so
+    those rows say nothing about the clutch model; NaN keeps them out of every residual."""
+    from dataclasses import replace
+
+    from clutch_model.formats.bag_reader import Campaign
+
+    results = campaign_lockup(campaign, **options)
+    runs = []
+    for run, res in zip(campaign.runs, results):
+        if run.torque_measured_nm is not None and res.segments:
+            tq = np.where(res.at(run.t, pad_s), np.nan, run.torque_measured_nm)
+            run = replace(run, torque_measured_nm=tq)
+        runs.append(run)
+    return Campaign(runs), results
