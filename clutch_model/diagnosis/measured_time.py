@@ -104,6 +104,11 @@ def _run_grid(run, rate_hz):
         t_end = max(t_end, float(tq[-1]))
     fine = t0 + np.arange(int(np.floor((t_end - t0) * rate_hz)) + 1) / rate_hz
     stamps = tq[(tq >= t0) & (tq <= t_end)] if tq is not None else np.zeros(0)
+    if stamps.size:
+        # fine points within 0.2 periods of a stamp are dropped (no near-duplicate rows)
+        pos = np.clip(np.searchsorted(stamps, fine), 1, stamps.size - 1) if stamps.size > 1 else np.zeros(fine.size, int)
+        near = np.minimum(np.abs(fine - stamps[pos]), np.abs(fine - stamps[np.maximum(pos - 1, 0)]))
+        fine = fine[near > 0.2 / rate_hz]
     return np.union1d(fine, stamps)
 
 
@@ -211,3 +216,53 @@ def simulate_at_measured_times(model, runs, rate_hz: float = 1000.0, energy0_j=N
     sim = simulate(model, g.t, g.force, g.slip, g.sump, run_start=g.run_start, energy0_j=energy0_j)
     pred = np.asarray(predict_measured_torque(model, g.t, sim.torque_nm, g.run_start), float)
     return MeasuredTimeSimulation(grid=g, sim=sim, torque_pred=pred, comparison=g.comparison(pred))
+
+
+def measured_time_campaign(runs, rate_hz: float | None = None):
+    """The campaign re-gridded for comparing where the measurement is, in the replay-grid
+    form every grid-based tool takes (bag_reader.Campaign): per run a grid at ``rate_hz``
+    (default: the run's mean applied-force rate) joined with its torque stamps, inputs
+    linearly interpolated between their own samples, ``torque_measured_nm`` the measured
+    sample at its own stamp and NaN on every other row (so residuals exist only where the
+    measurement is), pack temperature linearly interpolated. Names, start times and the raw
+    samples are kept."""
+    from dataclasses import replace
+
+    from clutch_model.formats.bag_reader import Campaign
+
+    campaign = runs if isinstance(runs, Campaign) else Campaign(list(runs))
+    out = []
+    for run in campaign.runs:
+        tf = run.samples["applied_force"][0]
+        rate = rate_hz or ((tf.size - 1) / max(float(tf[-1] - tf[0]), 1e-9) if tf.size > 1 else 200.0)
+        g = _run_grid(run, rate)
+        vals = {ch: np.interp(g, *run.samples[ch]) for ch in ("applied_force", "slip_speed", "sump_temperature")}
+        torque = None
+        tq = run.torque_measured_t
+        if tq is not None and tq.size:
+            torque = np.full(g.size, np.nan)
+            pos = np.minimum(np.searchsorted(g, tq), g.size - 1)
+            hit = np.abs(g[pos] - tq) < 1e-12
+            torque[pos[hit]] = run.torque_measured_raw_nm[hit]
+        pack = None
+        if "pack_temperature" in run.samples:
+            tp, vp = run.samples["pack_temperature"]
+            pack = np.interp(g, tp, vp, left=np.nan, right=np.nan)
+        out.append(replace(run, t=g, applied_force_n=vals["applied_force"], slip_speed_rad_s=vals["slip_speed"],
+                           sump_temperature_c=vals["sump_temperature"], torque_measured_nm=torque,
+                           pack_temperature_measured_c=pack))
+    return Campaign(out)
+
+
+def topics_unaligned(runs) -> bool:
+    """True when some run's measured-torque stamps are not all force stamps (the replay
+    grid would then hold each torque sample to later force rows)."""
+    for run in runs:
+        tq = run.torque_measured_t
+        if tq is None or not tq.size or "applied_force" not in run.samples:
+            continue
+        tf = run.samples["applied_force"][0]
+        pos = np.minimum(np.searchsorted(tf, tq), tf.size - 1)
+        if np.any(np.abs(tf[pos] - tq) > 1e-9):
+            return True
+    return False
