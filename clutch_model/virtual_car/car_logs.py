@@ -20,7 +20,9 @@ Drive (per run, segments back to back until the run's end; ``schedule``):
            torque is set by the driveline: ``load_fraction`` (0.2-0.8, slowly varying) × the
            clutch's static capacity (the plant's locked output), so it is below the capacity
            and not equal to it.
-  Slip moves smoothly between segment levels (1-15 rad/s, log-uniform) with a ±2 % wobble;
+  Slip moves smoothly between segment levels (1-15 rad/s, log-uniform) with a ±2 % wobble
+  (``slip_sign_changes``: a segment flips the sign with probability 0.25, crossing 0 in
+  ~0.1 s while slipping; a lock keeps the sign of the slip before it in the torque);
   request forces are capped by ``power_limit_w`` / (0.2·N_f·r_m·|slip|).
 Schedules: ``short-runs`` (10 runs × 10 s), ``few-long`` (3 runs × 60 s), ``long-drive``
 (one bag of 240 s); ``n_runs`` / ``run_duration_s`` override.
@@ -114,6 +116,7 @@ class CarLogSpec:
     noise: dict = field(default_factory=dict)       # channel -> Noise (defaults above)
     random_phase: bool = True                       # each topic's first sample at U(0, period)
     lockup: bool = True
+    slip_sign_changes: bool = False                 # segments may change the slip's sign
     lock_dwell_s: tuple = (0.8, 2.5)
     load_fraction: tuple = (0.2, 0.8)
     mechanisms: list = field(default_factory=list)  # [{"id": ..., <parameter>: value}]
@@ -237,8 +240,13 @@ def _drive_profile(rng, spec: CarLogSpec, t: np.ndarray, k_t: float):
     wlo, whi = spec.slip_range_rad_s
     flo, fhi_max = spec.force_range_n
 
+    sign = [1.0]
+
     def slip_level():
-        return float(wlo * (whi / wlo) ** rng.uniform())
+        level = float(wlo * (whi / wlo) ** rng.uniform())
+        if spec.slip_sign_changes and rng.random() < 0.25:
+            sign[0] = -sign[0]          # the other wheel faster: slip crosses 0 while slipping
+        return sign[0] * level
 
     def f_cap(w):
         return max(min(fhi_max, spec.power_limit_w / (k_t * max(w, 1e-3))), flo + 500.0)
@@ -302,7 +310,7 @@ def _drive_profile(rng, spec: CarLogSpec, t: np.ndarray, k_t: float):
             base_w = w_cur + (w_new - w_cur) * blend
             wob = 1.0 + 0.02 * np.sin(2 * np.pi * rng.uniform(0.2, 0.6) * tt + rng.uniform(0, 2 * np.pi))
             slip[i0:i1] = base_w * wob
-            cap = f_cap(max(w_cur, w_new) * 1.02)
+            cap = f_cap(max(abs(w_cur), abs(w_new)) * 1.02)
             if kind == "hold":
                 lvl = float(rng.uniform(flo, cap))
                 r = float(rng.uniform(0.05, 0.3))

@@ -33,6 +33,8 @@ def add_car_logs_options(p) -> None:
     g.add_argument("--jitter", action="append", default=[], metavar="TOPIC=S",
                    help="uniform sampling jitter half-width, e.g. force=0.001")
     g.add_argument("--no-lockup", dest="lockup", action="store_false", help="no lock-up phases")
+    g.add_argument("--slip-sign-changes", action="store_true",
+                   help="the slip changes sign between segments (crosses 0 while slipping)")
 
 
 def _pairs(items, what):
@@ -76,7 +78,7 @@ def run_car_logs(args) -> int:
         noise["slip_speed"] = parse_noise(args.slip_noise_model)
     spec = CarLogSpec(seed=args.seed, schedule=args.schedule, n_runs=args.car_runs,
                       run_duration_s=args.car_duration, clocks=clocks, noise=noise,
-                      lockup=args.lockup, mechanisms=mechs, effects=effects,
+                      lockup=args.lockup, slip_sign_changes=args.slip_sign_changes, mechanisms=mechs, effects=effects,
                       friction_spread=args.friction_spread,
                       include_pack_temperature=args.pack_temperature)
     spec.validate()

@@ -218,3 +218,23 @@ def test_measured_time_campaign(short_campaign):
                            for r, n in zip(runs, camp.runs)])
     assert a.size == b.size
     assert np.sqrt(np.mean((a - b)[~lock] ** 2)) < 3.0
+
+
+def test_lock_detection_with_slip_sign_changes(tmp_path_factory):
+    """Slip crossing 0 while slipping is not a lock; locked torque keeps the last slip's sign."""
+    res, paths, runs = make_campaign(tmp_path_factory, "signs", seed=33, schedule="few-long",
+                                     run_duration_s=40.0, slip_sign_changes=True)
+    crossings = 0
+    for run in runs:
+        side = sidecar(paths, run.name)
+        w = side["fine_slip_speed_rad_s"]
+        crossings += int(np.sum((w[1:] * w[:-1] < 0)))
+        lk = side["fine_locked"]
+        # while locked the driveline torque has the sign of the slip before the lock
+        starts = np.flatnonzero(np.diff(lk.astype(int)) == 1) + 1
+        for s0 in starts:
+            before = w[:s0][np.abs(w[:s0]) > 1e-3][-1]
+            assert np.sign(side["fine_torque_nm"][s0]) == np.sign(before)
+    assert crossings >= 2
+    prec, rec, n = precision_recall(paths, runs)
+    assert prec >= 0.85 and rec >= 0.95, (prec, rec)
