@@ -712,3 +712,46 @@ def parse_noise(text: str) -> Noise:
     if "window" in opts:
         opts["window"] = int(opts["window"])
     return make_noise(kind, sigma, **opts)
+
+
+def true_sensor_torque_at(sidecar: dict, t_s) -> np.ndarray:
+    """The noise-free sensor reading at any times (s from the bag's first message, e.g. the
+    replay CSV's ``t``), linearly interpolated on the fine grid; NaN outside it."""
+    t_s = np.asarray(t_s, float)
+    ft = sidecar["fine_t_s"]
+    out = np.interp(t_s, ft, sidecar["fine_sensor_torque_nm"])
+    out[(t_s < ft[0]) | (t_s > ft[-1])] = np.nan
+    return out
+
+
+def score_against_truth(model: ClutchModel, runs, truth_dir, rate_hz: float = 1000.0,
+                        lock_pad_s: float = 0.1) -> dict:
+    """Held-out scoring against the true torque: ``model`` simulated where the measurement is
+    (diagnosis.measured_time.simulate_at_measured_times) on ``runs`` (read_bags output), its
+    predicted measurement compared with ``torque_true_nm`` of ``truth_dir/<run>.npz`` at the
+    torque stamps, samples within ``lock_pad_s`` of a true lock phase left out (the driveline
+    sets the torque there). Returns {"rmse_nm": overall, "runs": {name: rmse}, "samples": n}."""
+    from clutch_model.diagnosis.measured_time import simulate_at_measured_times
+
+    mts = simulate_at_measured_times(model, runs, rate_hz=rate_hz)
+    cmp = mts.comparison
+    sq, n, per = 0.0, 0, {}
+    for j, name in enumerate(cmp.names):
+        side = load_truth_sidecar(Path(truth_dir) / f"{name}.npz")
+        sl = cmp.run_slice(j)
+        if sl.stop == sl.start:
+            continue
+        truth = side["torque_true_nm"]
+        if truth.size != sl.stop - sl.start:
+            raise DataError(f"truth sidecar of {name} does not match its bag ({truth.size} torque samples "
+                            f"vs {sl.stop - sl.start})")
+        ft, fl = side["fine_t_s"], side["fine_locked"].astype(float)
+        near_lock = np.interp(cmp.t[sl], ft, fl) > 0
+        if lock_pad_s > 0 and fl.any():
+            for d in (-lock_pad_s, lock_pad_s):
+                near_lock |= np.interp(cmp.t[sl] + d, ft, fl) > 0
+        ok = cmp.valid[sl] & ~near_lock
+        err = cmp.model[sl][ok] - truth[ok]
+        per[name] = float(np.sqrt(np.mean(err ** 2))) if err.size else float("nan")
+        sq += float(np.sum(err ** 2)); n += int(err.size)
+    return {"rmse_nm": float(np.sqrt(sq / n)) if n else float("nan"), "runs": per, "samples": n}

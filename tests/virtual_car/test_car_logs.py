@@ -205,3 +205,19 @@ def test_cli_car_logs(tmp_path):
     truth = json.loads((out / "truth.json").read_text())
     assert truth["noise"]["measured_torque"]["kind"] == "ar1" and truth["clocks"]["measured_torque"]["rate_hz"] == 100
     assert main(["synth", "--conditions", "car-logs", "--out", str(tmp_path / "d"), "--effect", "nope"]) == 1
+
+
+def test_score_against_truth(short_campaign):
+    """The true model scores close to 0 against the true torque (input noise only); a model
+    with a wrong mechanism scores far worse."""
+    from clutch_model.plant.mechanisms import make_mechanism
+    from clutch_model.virtual_car.car_logs import score_against_truth, true_sensor_torque_at
+    result, paths, runs = short_campaign
+    truth_dir = Path(paths["truth"]).parent / "truth"
+    model = load_model(paths["truth_model"])
+    good = score_against_truth(model, runs, truth_dir)
+    bad = score_against_truth(model.with_mechanisms([make_mechanism("torque_offset", offset_nm=20.0)]), runs, truth_dir)
+    assert good["rmse_nm"] < 6.0 and good["samples"] > 1000
+    assert bad["rmse_nm"] == pytest.approx(np.hypot(20.0, good["rmse_nm"]), rel=0.1)
+    side = sidecar(paths, runs[0].name)
+    np.testing.assert_allclose(true_sensor_torque_at(side, side["fine_t_s"][5:9]), side["fine_sensor_torque_nm"][5:9])
