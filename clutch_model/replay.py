@@ -72,7 +72,7 @@ def replay_runs(model: ClutchModel, runs, energy0_j: float | None = None) -> Rep
 
 
 def replay_csv_header(has_torque: bool, has_pack: bool) -> list:
-    header = ["bag", "t", "torque_sim", "pack_temperature_sim"]
+    header = ["bag", "t", "torque_sim", "pack_temperature_sim", "locked"]
     if has_torque:
         header.append("torque_measured")
     if has_pack:
@@ -83,7 +83,8 @@ def replay_csv_header(has_torque: bool, has_pack: bool) -> list:
 def replay_csv_blocks(result: ReplayResult, has_torque: bool, has_pack: bool):
     """(bag name, columns of replay_csv_header) per run of ``result``."""
     for r, sl in result.campaign.slices():
-        cols = [r.t, result.torque_sim[sl], result.sim.pack_temperature_c[sl]]
+        cols = [r.t, result.torque_sim[sl], result.sim.pack_temperature_c[sl],
+                result.sim.locked[sl].astype(np.int64)]
         if has_torque:
             cols.append(r.torque_measured_nm if r.torque_measured_nm is not None else np.full(len(r), np.nan))
         if has_pack:
@@ -93,7 +94,9 @@ def replay_csv_blocks(result: ReplayResult, has_torque: bool, has_pack: bool):
 
 
 def write_replay_csv(result: ReplayResult, path) -> Path:
-    """OUT.csv: bag,t,torque_sim,pack_temperature_sim[,torque_measured][,pack_temperature_measured]."""
+    """OUT.csv: bag,t,torque_sim,pack_temperature_sim,locked[,torque_measured][,pack_temperature_measured].
+
+    ``locked`` is 1 where the model reports the static capacity (|slip| < lock_slip_rad_s)."""
     runs = result.campaign.runs
     has_torque = any(r.torque_measured_nm is not None for r in runs)
     has_pack = any(r.pack_temperature_measured_c is not None for r in runs)

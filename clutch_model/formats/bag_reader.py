@@ -34,6 +34,31 @@ class Run:
     pack_temperature_measured_c: np.ndarray | None = None
     start_time_ns: int = 0
     rejected_samples: int = 0
+    # every topic's own samples as logged (times in s from the bag's first message, valid
+    # samples only, log-time order): {channel: (t_s, values)}, channel one of applied_force,
+    # slip_speed, sump_temperature, measured_torque, pack_temperature. The grid above holds
+    # the latest sample at each force row; diagnosis compares where the measurement is.
+    samples: dict = field(default_factory=dict)
+
+    @property
+    def torque_measured_t(self) -> np.ndarray | None:
+        """Log times (s from the bag's first message) of the measured-torque samples."""
+        s = self.samples.get("measured_torque")
+        return None if s is None else s[0]
+
+    @property
+    def torque_measured_raw_nm(self) -> np.ndarray | None:
+        """The measured-torque samples at their own times ``torque_measured_t``."""
+        s = self.samples.get("measured_torque")
+        return None if s is None else s[1]
+
+    @property
+    def slip_raw_t(self) -> np.ndarray:
+        return self.samples["slip_speed"][0]
+
+    @property
+    def slip_raw_rad_s(self) -> np.ndarray:
+        return self.samples["slip_speed"][1]
 
     @property
     def duration_s(self) -> float:
@@ -158,6 +183,9 @@ def _valid(topic_kind: str, values: np.ndarray) -> np.ndarray:
     return ok
 
 
+_CHANNEL = {"force": "applied_force", "slip": "slip_speed", "sump": "sump_temperature"}
+
+
 def _latest(times: np.ndarray, values: np.ndarray, at: np.ndarray) -> np.ndarray:
     idx = np.searchsorted(times, at, side="right") - 1
     if not idx.size or idx.min() >= 0:           # the usual case: every row has a sample before it
@@ -178,6 +206,7 @@ def read_bag(path, topics: TopicNames = TopicNames(), bulk: bool = True) -> Run:
     name = bag_name(path)
     rejected = 0
     inputs = {}
+    samples = {}
     for kind, topic in (("force", topics.applied_force), ("slip", topics.slip_speed),
                         ("sump", topics.sump_temperature)):
         if topic not in series:
@@ -189,6 +218,7 @@ def read_bag(path, topics: TopicNames = TopicNames(), bulk: bool = True) -> Run:
         if not n_ok:
             raise DataError(f"bag {name}: topic {topic} has no valid samples")
         inputs[kind] = (times, values) if n_ok == ok.size else (times[ok], values[ok])
+        samples[_CHANNEL[kind]] = ((inputs[kind][0] - first_ns) * 1e-9, inputs[kind][1])
     t0_inputs = max(inputs[k][0][0] for k in inputs)
     rows = inputs["force"][0]
     rows = rows[rows >= t0_inputs]
@@ -202,12 +232,15 @@ def read_bag(path, topics: TopicNames = TopicNames(), bulk: bool = True) -> Run:
         sump_temperature_c=_latest(*inputs["sump"], rows),
         start_time_ns=first_ns,
         rejected_samples=rejected,
+        samples=samples,
     )
-    for attr, topic in (("torque_measured_nm", topics.measured_torque),
-                        ("pack_temperature_measured_c", topics.pack_temperature)):
+    for attr, chan, topic in (("torque_measured_nm", "measured_torque", topics.measured_torque),
+                              ("pack_temperature_measured_c", "pack_temperature", topics.pack_temperature)):
         if topic in series:
             times, values = series[topic]
             setattr(run, attr, _latest(times, values, rows))
+            ok = np.isfinite(values)
+            samples[chan] = ((times[ok] - first_ns) * 1e-9, values[ok])
     return run
 
 

@@ -59,9 +59,11 @@ def test_replay_grid_and_values(tmp_path, storage):
     out = tmp_path / "out.csv"
     assert cli(["replay", "--bag", str(bag), "--out", str(out)]) == 0
     rows = read_csv(out)
-    assert list(rows[0].keys()) == ["bag", "t", "torque_sim", "pack_temperature_sim", "torque_measured"]
+    assert list(rows[0].keys()) == ["bag", "t", "torque_sim", "pack_temperature_sim", "locked",
+                                    "torque_measured"]
     assert {r["bag"] for r in rows} == {"run_a"}
     t_exp, sim = expected(sig, t_first_msg=0.0)
+    np.testing.assert_array_equal([int(r["locked"]) for r in rows], sim.locked.astype(int))
     t = np.array([float(r["t"]) for r in rows])
     np.testing.assert_allclose(t, t_exp, atol=1e-9)
     np.testing.assert_allclose([float(r["torque_sim"]) for r in rows], sim.torque_nm, rtol=1e-5, atol=1e-6)  # log times are ns-rounded
