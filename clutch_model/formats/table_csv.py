@@ -46,7 +46,7 @@ def _block_orjson(orjson, prefix: bytes, cols: list, a: int, b: int) -> bytes:
     # mixed kinds (integer flags): each column formatted alone, rows joined
     parts = []
     for c in cols:
-        c = c[a:b]
+        c = np.ascontiguousarray(c[a:b])
         if c.dtype.kind == "f":
             text = orjson.dumps(c, option=orjson.OPT_SERIALIZE_NUMPY)[1:-1].replace(b"null", b"")
         else:
