@@ -52,7 +52,7 @@ def test_every_mechanism_is_documented():
     text = (DOCS / "mechanisms.md").read_text()
     for mid, mech in CATALOG.items():
         assert f"`{mid}`" in text, mid
-        for name in mech.parameters:
+        for name in mech.parameter_names():
             assert f"`{name}`" in text, (mid, name)
 
 
