@@ -7,6 +7,9 @@ State vector (float64[N_STATE]):
   2 hysteresis force [N]        3 pack force (lag state) [N]
   4 energy E = int |w T| dt [J] 5 sign of the last slip above the lock tolerance
   6 heat power |w T| at the last output [W]
+  7 slip angle int w dt since the run start, wrapped to [-pi, pi) [rad]
+  8 pack-force target before the last advance [N]   9 length of the last advance [s]
+  10.. low-pass states of the discovered terms (one per term slot)
 
 Film integration: exponential (Rosenbrock-)Euler steps on h with the analytic Jacobian,
 sub-stepped so that h changes by at most MAX_REL_DH per sub-step. It is exact for the
@@ -24,8 +27,16 @@ from numba import njit, prange
 
 from clutch_model.plant import params as P
 
-N_STATE = 7
 S_H, S_THETA, S_FHYST, S_FPACK, S_ENERGY, S_SIGN, S_POWER = range(7)
+S_ANGLE, S_FPREV, S_DT, S_TERM0 = 7, 8, 9, 10
+N_STATE = S_TERM0 + P.MAX_DISCOVERED_TERMS
+
+# signals the discovered terms are built from (clutch_model.discovery.terms names them)
+(SIG_NONE, SIG_PRESSURE, SIG_PACK_TEMP, SIG_SLIP_ABS, SIG_SLIP_POWER, SIG_ENERGY,
+ SIG_FORCE_RATE, SIG_SIN_ANGLE, SIG_COS_ANGLE, SIG_SLIP, SIG_SLIP_SIGN) = range(11)
+TERM_FRICTION, TERM_TORQUE = 1, 2
+THETA_REF_C = 60.0
+DISC_FACTOR_MIN = 0.05
 
 # output record
 N_OUT = 16
@@ -101,6 +112,65 @@ def friction_coefficient(w_abs, pressure_mpa, theta, p):
     e = math.exp(-(r ** p[P.FRICTION_I])) if r < 1e6 else 0.0
     mu = mu_c + (mu_s - mu_c) * e + k_v * w_abs
     return mu if mu > 0.0 else 0.0
+
+
+@njit(cache=True)
+def term_signal(code, state, w, pressure_mpa, theta):
+    """Value of one discovered-term signal (SIG_*) at the current state and inputs:
+    contact pressure [MPa], pack temperature above 60 C [C], |slip| [rad/s], slip power at
+    the last output [kW], dissipated energy [MJ], pack-force rate over the last step [kN/s],
+    sin/cos of the slip angle, signed slip [rad/s], sign of slip."""
+    if code == SIG_PRESSURE:
+        return pressure_mpa
+    if code == SIG_PACK_TEMP:
+        return theta - THETA_REF_C
+    if code == SIG_SLIP_ABS:
+        return abs(w)
+    if code == SIG_SLIP_POWER:
+        return state[S_POWER] * 1e-3
+    if code == SIG_ENERGY:
+        return state[S_ENERGY] * 1e-6
+    if code == SIG_FORCE_RATE:
+        dt = state[S_DT]
+        return (state[S_FHYST] - state[S_FPREV]) / dt * 1e-3 if dt > 0.0 else 0.0
+    if code == SIG_SIN_ANGLE:
+        return math.sin(state[S_ANGLE])
+    if code == SIG_COS_ANGLE:
+        return math.cos(state[S_ANGLE])
+    if code == SIG_SLIP:
+        return w
+    if code == SIG_SLIP_SIGN:
+        return 1.0 if w > 0.0 else (-1.0 if w < 0.0 else 0.0)
+    return 1.0
+
+
+@njit(cache=True)
+def term_raw(p, j, state, w, pressure_mpa, theta):
+    """Product of the two signals of discovered-term slot j (before its low-pass)."""
+    base = P.DISC_SLOTS + P.DISC_SLOT * j
+    g = term_signal(int(p[base + 1]), state, w, pressure_mpa, theta)
+    b = int(p[base + 2])
+    if b != SIG_NONE:
+        g *= term_signal(b, state, w, pressure_mpa, theta)
+    return g
+
+
+@njit(cache=True)
+def discovered_terms(p, state, w, pressure_mpa, theta):
+    """(friction multiplier 1 + sum c g, additive torque sum c g) of the discovered terms."""
+    n = int(p[P.DISC_N])
+    fac = 1.0
+    add = 0.0
+    for j in range(n):
+        base = P.DISC_SLOTS + P.DISC_SLOT * j
+        g = state[S_TERM0 + j] if p[base + 3] > 0.0 else term_raw(p, j, state, w, pressure_mpa, theta)
+        if int(p[base]) == TERM_FRICTION:
+            fac += p[base + 4] * g
+        else:
+            add += p[base + 4] * g
+    if fac < DISC_FACTOR_MIN:
+        fac = DISC_FACTOR_MIN
+    return fac, add
 
 
 @njit(cache=True)
@@ -221,6 +291,11 @@ def init_state(state, applied_force, sump_temperature, p):
         f = f - pre if f > pre else 0.0
     state[S_FHYST] = min(f, 1e12)
     state[S_FPACK] = state[S_FHYST]
+    state[S_ANGLE] = 0.0
+    state[S_FPREV] = state[S_FHYST]
+    state[S_DT] = 0.0
+    for j in range(P.MAX_DISCOVERED_TERMS):
+        state[S_TERM0 + j] = 0.0
 
 
 @njit(cache=True)
@@ -250,6 +325,10 @@ def outputs(state, slip, sump_temperature, p, d, out):
     degr = 1.0
     if p[P.ENERGY_SCALE_J] > 0.0:
         degr = math.exp(-state[S_ENERGY] / p[P.ENERGY_SCALE_J])
+    extra = 0.0
+    if p[P.DISC_N] > 0.0:
+        fac, extra = discovered_terms(p, state, w, pressure_mpa, theta)
+        degr *= fac
     if locked:
         mu_f = friction_coefficient(0.0, pressure_mpa, theta, p) * degr
         t_a = sign * mu_f * pa * d[D_TA_GEOM]
@@ -263,6 +342,7 @@ def outputs(state, slip, sump_temperature, p, d, out):
         phi_fs = 11.1 * hh ** 2.31 * math.exp(-2.38 * hh + 0.11 * hh * hh) if hh <= 5.0 else 0.0
         t_h = w * (phi_f + phi_fs) / h * mu * d[D_TH_GEOM]
         drag = p[P.DRAG_COEFF] * w * mu / d[D_MU60] if p[P.DRAG_COEFF] != 0.0 else 0.0
+        drag += extra
     torque = t_a + t_h + drag
     power = abs(w * torque)
     state[S_POWER] = power
@@ -292,6 +372,8 @@ def advance(state, slip, sump_temperature, dt, p, d, scratch):
     split, so slow input rates (10 Hz) keep the accuracy of fast ones."""
     if not (dt > 0.0):
         return
+    state[S_FPREV] = state[S_FHYST]
+    state[S_DT] = dt
     n = int(math.ceil(dt / MAX_STEP_S))
     if n < 1:
         n = 1
@@ -303,6 +385,8 @@ def advance(state, slip, sump_temperature, dt, p, d, scratch):
 @njit(cache=True)
 def _advance_once(state, slip, sump_temperature, dt, p, d, scratch):
     theta0 = state[S_THETA]
+    if p[P.DISC_N] > 0.0:
+        _advance_term_filters(state, slip, dt, p, d)
     mu = viscosity(theta0, p)
     tau = p[P.LAG_TAU_S]
     f_start = state[S_FPACK]
@@ -329,6 +413,22 @@ def _advance_once(state, slip, sump_temperature, dt, p, d, scratch):
     state[S_THETA] = theta0 + (q / k - (theta0 - sump)) * frac
     state[S_ENERGY] += heat * dt
     state[S_POWER] = p_end  # heat power at the end of the step (inputs held)
+    a = state[S_ANGLE] + min(max(slip, -SLIP_LIMIT), SLIP_LIMIT) * dt
+    state[S_ANGLE] = a - 2.0 * math.pi * math.floor((a + math.pi) / (2.0 * math.pi))
+
+
+@njit(cache=True)
+def _advance_term_filters(state, slip, dt, p, d):
+    """First-order low-pass (exact for the signal held over dt) of every discovered term
+    that has a time constant, driven by the signal at the start of the step."""
+    w = min(max(slip, -SLIP_LIMIT), SLIP_LIMIT)
+    pressure_mpa = min(state[S_FPACK], d[D_FMAX]) / d[D_AN] * 1e-6
+    for j in range(int(p[P.DISC_N])):
+        tau = p[P.DISC_SLOTS + P.DISC_SLOT * j + 3]
+        if tau > 0.0:
+            g = term_raw(p, j, state, w, pressure_mpa, state[S_THETA])
+            x = state[S_TERM0 + j]
+            state[S_TERM0 + j] = x + (g - x) * -math.expm1(-dt / tau)
 
 
 @njit(cache=True)

@@ -196,6 +196,9 @@ CATALOG = {cls.id: cls for cls in (ActuatorLag, ActuatorHysteresis, SpringPreloa
 
 
 def make_mechanism(mech_id: str, **values) -> Mechanism:
+    if mech_id == "discovered":   # beyond the catalog: terms found from the data
+        from clutch_model.plant.discovered import Discovered
+        return Discovered(dict(values))
     if mech_id not in CATALOG:
         raise ParamsError(f"unknown mechanism id '{mech_id}' (known: {', '.join(CATALOG)})")
     return CATALOG[mech_id](dict(values))
