@@ -15,7 +15,7 @@ Term ids read ``<kind>:<signal>[*<signal>][@<tau>s]``:
   like the rest of the transmitted torque);
 * signals (kernels.SIG_*): ``pressure`` [MPa], ``pack_temperature`` (θ_pack − 60 °C) [°C],
   ``slip_abs`` |ω| [rad/s], ``slip`` ω [rad/s], ``slip_sign`` sign(ω), ``slip_power`` |ω·T|
-  at the last output [kW], ``energy`` dissipated since the campaign start [MJ],
+  of the previous sample's output [kW], ``energy`` dissipated since the campaign start [MJ],
   ``force_rate`` pack-force rate over the last step [kN/s], ``sin_slip_angle`` /
   ``cos_slip_angle`` of the slip angle ∫ω dt since the run start (once per revolution);
 * ``@<tau>s``: the product passes a first-order low-pass with time constant tau (a dynamic

@@ -9,7 +9,8 @@ State vector (float64[N_STATE]):
   6 heat power |w T| at the last output [W]
   7 slip angle int w dt since the run start, wrapped to [-pi, pi) [rad]
   8 pack-force target before the last advance [N]   9 length of the last advance [s]
-  10.. low-pass states of the discovered terms (one per term slot)
+  10 heat power |w T| of the output before the last advance (the previous row's) [W]
+  11.. low-pass states of the discovered terms (one per term slot)
 
 Film integration: exponential (Rosenbrock-)Euler steps on h with the analytic Jacobian,
 sub-stepped so that h changes by at most MAX_REL_DH per sub-step. It is exact for the
@@ -28,7 +29,7 @@ from numba import njit, prange
 from clutch_model.plant import params as P
 
 S_H, S_THETA, S_FHYST, S_FPACK, S_ENERGY, S_SIGN, S_POWER = range(7)
-S_ANGLE, S_FPREV, S_DT, S_TERM0 = 7, 8, 9, 10
+S_ANGLE, S_FPREV, S_DT, S_PPREV, S_TERM0 = 7, 8, 9, 10, 11
 N_STATE = S_TERM0 + P.MAX_DISCOVERED_TERMS
 
 # signals the discovered terms are built from (clutch_model.discovery.terms names them)
@@ -117,8 +118,8 @@ def friction_coefficient(w_abs, pressure_mpa, theta, p):
 @njit(cache=True)
 def term_signal(code, state, w, pressure_mpa, theta):
     """Value of one discovered-term signal (SIG_*) at the current state and inputs:
-    contact pressure [MPa], pack temperature above 60 C [C], |slip| [rad/s], slip power at
-    the last output [kW], dissipated energy [MJ], pack-force rate over the last step [kN/s],
+    contact pressure [MPa], pack temperature above 60 C [C], |slip| [rad/s], slip power of
+    the previous row's output [kW], dissipated energy [MJ], pack-force rate over the last step [kN/s],
     sin/cos of the slip angle, signed slip [rad/s], sign of slip."""
     if code == SIG_PRESSURE:
         return pressure_mpa
@@ -127,7 +128,7 @@ def term_signal(code, state, w, pressure_mpa, theta):
     if code == SIG_SLIP_ABS:
         return abs(w)
     if code == SIG_SLIP_POWER:
-        return state[S_POWER] * 1e-3
+        return state[S_PPREV] * 1e-3
     if code == SIG_ENERGY:
         return state[S_ENERGY] * 1e-6
     if code == SIG_FORCE_RATE:
@@ -294,6 +295,7 @@ def init_state(state, applied_force, sump_temperature, p):
     state[S_ANGLE] = 0.0
     state[S_FPREV] = state[S_FHYST]
     state[S_DT] = 0.0
+    state[S_PPREV] = 0.0
     for j in range(P.MAX_DISCOVERED_TERMS):
         state[S_TERM0 + j] = 0.0
 
@@ -374,6 +376,7 @@ def advance(state, slip, sump_temperature, dt, p, d, scratch):
         return
     state[S_FPREV] = state[S_FHYST]
     state[S_DT] = dt
+    state[S_PPREV] = state[S_POWER]
     n = int(math.ceil(dt / MAX_STEP_S))
     if n < 1:
         n = 1
