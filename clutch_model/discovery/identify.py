@@ -372,9 +372,30 @@ def discover(campaign, calibrated_model: ClutchModel, split, noise_model=None, *
                                           "dropped: " + ", ".join(t.id for t in chosen if t not in keep)
                                           + " (95 % interval covers 0)")))
         chosen = keep
-    coefs, ci, model = fit["coefficients"], fit["ci"], fit["model"]
     resid_ext = np.where(valid, np.asarray(campaign.torque_measured, float) - fit["predicted"], np.nan)
     verdict = test(campaign, eval_rows, base_eval, resid_ext)
+    # each term (a ripple pair as one) must earn its place on the held-out data too: the
+    # extension refitted without it must lose to the extension with it, else it goes
+    while verdict.accepted and keep and len(_term_groups(chosen)) > 1:
+        weakest = None
+        for group in _term_groups(chosen):
+            rest = [t for t in chosen if t not in group]
+            fit_r = _refit_terms(rest, lib_ids, x_perp, y_perp, sig, sim, fit_rows, anchor, campaign, sigma, say)
+            resid_r = np.where(valid, np.asarray(campaign.torque_measured, float) - fit_r["predicted"], np.nan)
+            v = test(campaign, eval_rows, resid_r, resid_ext)
+            if not v.accepted and (weakest is None or v.z_stat < weakest[1].z_stat):
+                weakest = (group, v, rest, fit_r, resid_r)
+        if weakest is None:
+            break
+        group, v, rest, fit_r, resid_r = weakest
+        tried.append(Tried([t.id for t in chosen], list(fit["coefficients"]), _rmse(resid_ext, eval_rows),
+                           HeldOutVerdict(False, v.gain_pct, v.rmse_base_nm, v.rmse_candidate_nm, v.z_stat,
+                                          v.runs_improved,
+                                          f"dropped {', '.join(t.id for t in group)}: it adds nothing that "
+                                          f"holds on the held-out data ({v.reason})")))
+        chosen, fit, resid_ext = rest, fit_r, resid_r
+        verdict = test(campaign, eval_rows, base_eval, resid_ext)
+    coefs, ci, model = fit["coefficients"], fit["ci"], fit["model"]
     if verdict.accepted and not keep:
         verdict = HeldOutVerdict(False, verdict.gain_pct, verdict.rmse_base_nm, verdict.rmse_candidate_nm,
                                  verdict.z_stat, verdict.runs_improved,
@@ -400,6 +421,19 @@ def discover(campaign, calibrated_model: ClutchModel, split, noise_model=None, *
                            rmse_nm={"calibrated": base_rmse, "extended": ext_rmse},
                            gain_pct=verdict.gain_pct, model=model, verdict=verdict, tried=tried,
                            cv_mse=cv_mse, residual=resid_ext, base_residual=resid)
+
+
+def _term_groups(terms) -> list:
+    """Terms as the units that enter or leave together (a sin/cos ripple pair is one)."""
+    groups, seen = [], set()
+    for t in terms:
+        if t.id in seen:
+            continue
+        p = partner(t)
+        g = [t] + ([q for q in terms if p is not None and q.id == p.id])
+        seen |= {q.id for q in g}
+        groups.append(g)
+    return groups
 
 
 def _significant(terms, ci) -> list:

@@ -60,9 +60,13 @@ def _campaign_from(result, run_level_spread: float, rng) -> tuple:
 def make_case(seed: int, true_terms: dict | None = None, *, n_runs: int = 9,
               run_duration_s: float = 7.0, white_noise_nm: float = 6.0, coloured_noise_nm: float = 5.0,
               coloured_tau_s: float = 0.3, run_level_spread: float = 0.0, friction_spread: float = 0.05,
+              extra_effect: str | None = None, extra_magnitude: float | None = None,
               base_model: ClutchModel | None = None) -> TruthCase:
     """A synthetic campaign whose true clutch carries ``true_terms`` (term id -> coefficient),
-    and the calibrated model a diagnosis would start the discovery from."""
+    and the calibrated model a diagnosis would start the discovery from. ``extra_effect``: one
+    of the virtual car's own effects outside the catalog instead (its implementation, not the
+    discovered mechanism: 'pressure_temperature_cross', or 'torque_ripple' whose phase is
+    random per run)."""
     true_terms = dict(true_terms or {})
     base = base_model if base_model is not None else load_model(None)
     if true_terms:
@@ -70,7 +74,8 @@ def make_case(seed: int, true_terms: dict | None = None, *, n_runs: int = 9,
         base = base.with_mechanisms([m for m in base.mechanisms if m.id != "discovered"] + [mech])
     spec = CampaignSpec(seed=seed, n_runs=n_runs, run_duration_s=run_duration_s,
                         friction_spread=friction_spread, torque_noise_nm=white_noise_nm,
-                        torque_drift_nm=coloured_noise_nm, torque_drift_tau_s=coloured_tau_s)
+                        torque_drift_nm=coloured_noise_nm, torque_drift_tau_s=coloured_tau_s,
+                        extra_effect=extra_effect, magnitude=extra_magnitude)
     result = synthesize_campaign(spec, base_model=base)
     rng = np.random.default_rng([seed, 7])
     campaign, clean = _campaign_from(result, run_level_spread, rng)
