@@ -10,6 +10,10 @@ effect outside the catalog with a magnitude drawn from the seed, or none:
   slip_power    μ_f × (1 + c·P_slip[kW]), c in −(1-4) %/kW
   p_x_theta     μ_f × (1 + c·P[MPa]·(θ_pack − 60 °C)), c in 1e-3-4e-3
   ripple        μ_f × (1 + A·sin(φ + φ0)), φ the slip angle, A in 3-12 %, φ0 random
+  vc_p_x_theta  the virtual car's own pressure_temperature_cross (an independent implementation
+                of the P·θ term), c in 1e-3-4e-3
+  random_ripple the virtual car's torque_ripple, A in 3-15 %: once per revolution but its phase
+                redrawn every run, so nothing predicts it on an unseen run (a null case)
 
 The calibrated model is made as the diagnosis makes it (bench fit + friction correction on
 the fit runs); ``discover`` gets the campaign, that model and the held-out runs.
@@ -34,8 +38,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import numpy as np  # noqa: E402
 
-CASES = ["none", "run_level", "slip_power", "p_x_theta", "ripple"]
-NULL_CASES = ("none", "run_level")
+CASES = ["none", "run_level", "random_ripple", "slip_power", "p_x_theta", "vc_p_x_theta", "ripple"]
+NULL_CASES = ("none", "run_level", "random_ripple")
 
 
 def truth_for(case: str, seed: int):
@@ -50,6 +54,10 @@ def truth_for(case: str, seed: int):
         return {"mu:slip_power": -lu(0.01, 0.04)}, 0.0
     if case == "p_x_theta":
         return {"mu:pressure*pack_temperature": lu(1e-3, 4e-3)}, 0.0
+    if case == "vc_p_x_theta":
+        return {"mu:pressure*pack_temperature": lu(1e-3, 4e-3)}, 0.0
+    if case == "random_ripple":
+        return {}, lu(0.03, 0.15)
     if case == "ripple":
         a, ph = lu(0.03, 0.12), float(rng.uniform(0, 2 * np.pi))
         return {"mu:sin_slip_angle": a * math.cos(ph), "mu:cos_slip_angle": a * math.sin(ph)}, 0.0
@@ -60,8 +68,13 @@ def run_case(case: str, seed: int) -> dict:
     from clutch_model.discovery import discover
     from clutch_model.discovery.synthetic import make_case
 
-    terms, spread = truth_for(case, seed)
-    tc = make_case(seed, terms, run_level_spread=spread)
+    terms, mag = truth_for(case, seed)
+    if case == "vc_p_x_theta":
+        tc = make_case(seed, extra_effect="pressure_temperature_cross", extra_magnitude=terms[next(iter(terms))])
+    elif case == "random_ripple":
+        tc = make_case(seed, extra_effect="torque_ripple", extra_magnitude=mag)
+    else:
+        tc = make_case(seed, terms, run_level_spread=mag)
     t0 = time.perf_counter()
     res = discover(tc.campaign, tc.calibrated_model, tc.held_out, friction_anchor=tc.bench_model)
     elapsed = time.perf_counter() - t0
@@ -81,7 +94,7 @@ def run_case(case: str, seed: int) -> dict:
         rel_err = float(np.linalg.norm(est - truth) / np.linalg.norm(truth))
     else:
         rel_err = math.nan
-    return {"case": case, "seed": seed, "truth": terms, "spread": spread, "accepted": res.accepted,
+    return {"case": case, "seed": seed, "truth": terms, "magnitude": mag, "accepted": res.accepted,
             "found": found, "right": right, "rel_err": rel_err, "gain_pct": res.gain_pct,
             "gap_cal": gap_cal, "gap_ext": gap_ext, "seconds": elapsed,
             "reason": res.tried[-1].verdict.reason if res.tried else "no term selected"}

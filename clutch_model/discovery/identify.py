@@ -51,6 +51,7 @@ MIN_GROUPS = 3
 SPAN_GROUPS = 6          # a campaign of fewer runs is cut into this many time spans
 REFIT_NFEV = 30
 CI_BLOCK_S = 2.0
+RUN_CORRECTION_MAX = 0.3
 
 
 @dataclass
@@ -396,6 +397,8 @@ def discover(campaign, calibrated_model: ClutchModel, split, noise_model=None, *
         chosen, fit, resid_ext = rest, fit_r, resid_r
         verdict = test(campaign, eval_rows, base_eval, resid_ext)
     coefs, ci, model = fit["coefficients"], fit["ci"], fit["model"]
+    if verdict.accepted and keep:
+        verdict = _holds_run_by_run(verdict, chosen, coefs, model, campaign, resid_ext, eval_rows)
     if verdict.accepted and not keep:
         verdict = HeldOutVerdict(False, verdict.gain_pct, verdict.rmse_base_nm, verdict.rmse_candidate_nm,
                                  verdict.z_stat, verdict.runs_improved,
@@ -421,6 +424,40 @@ def discover(campaign, calibrated_model: ClutchModel, split, noise_model=None, *
                            rmse_nm={"calibrated": base_rmse, "extended": ext_rmse},
                            gain_pct=verdict.gain_pct, model=model, verdict=verdict, tried=tried,
                            cv_mse=cv_mse, residual=resid_ext, base_residual=resid)
+
+
+def _holds_run_by_run(verdict, terms, coefs, model, campaign, resid_ext, eval_rows) -> HeldOutVerdict:
+    """What remains must not still follow the terms: on each held-out run, the coefficients
+    that would fit that run best (least squares of the extended residual on the terms'
+    regressors) must be a small correction of the fitted ones. The RMS of that per-run
+    correction relative to the RMS of the terms' whole effect on the run must stay below
+    RUN_CORRECTION_MAX in the median held-out run. An effect whose form holds but whose size or
+    phase differs from run to run (a ripple with a random phase per run) fails here even when a
+    lucky phase gives a held-out gain."""
+    sim = replay_runs(model, campaign).sim
+    sig = TermSignals.from_simulation(campaign, sim)
+    xr = np.column_stack([t.regressor(sig) for t in terms])
+    effect = xr @ np.asarray(coefs, float)
+    ratios = []
+    for j in np.unique(np.asarray(campaign.run_index)[eval_rows]):
+        rows = eval_rows & (np.asarray(campaign.run_index) == j) & np.isfinite(resid_ext)
+        if rows.sum() < 20:
+            continue
+        e_rms = float(np.sqrt(np.mean(effect[rows] ** 2)))
+        if e_rms <= 0:
+            continue
+        delta = np.linalg.lstsq(xr[rows], resid_ext[rows], rcond=None)[0]
+        ratios.append(float(np.sqrt(np.mean((xr[rows] @ delta) ** 2))) / e_rms)
+    if not ratios:
+        return verdict
+    med = float(np.median(ratios))
+    if med <= RUN_CORRECTION_MAX:
+        return verdict
+    return HeldOutVerdict(False, verdict.gain_pct, verdict.rmse_base_nm, verdict.rmse_candidate_nm, verdict.z_stat,
+                          verdict.runs_improved,
+                          f"what remains on the held-out runs still follows the terms: each run would want "
+                          f"them changed by {100 * med:.0f} % of their effect (median; at most "
+                          f"{100 * RUN_CORRECTION_MAX:.0f} % for an effect that holds from run to run)")
 
 
 def _term_groups(terms) -> list:
