@@ -374,6 +374,8 @@ def advance(state, slip, sump_temperature, dt, p, d, scratch):
     split, so slow input rates (10 Hz) keep the accuracy of fast ones."""
     if not (dt > 0.0):
         return
+    if p[P.DISC_N] > 0.0:
+        _advance_term_filters(state, slip, dt, p, d)   # driven by the last sample's signals
     state[S_FPREV] = state[S_FHYST]
     state[S_DT] = dt
     state[S_PPREV] = state[S_POWER]
@@ -388,8 +390,6 @@ def advance(state, slip, sump_temperature, dt, p, d, scratch):
 @njit(cache=True)
 def _advance_once(state, slip, sump_temperature, dt, p, d, scratch):
     theta0 = state[S_THETA]
-    if p[P.DISC_N] > 0.0:
-        _advance_term_filters(state, slip, dt, p, d)
     mu = viscosity(theta0, p)
     tau = p[P.LAG_TAU_S]
     f_start = state[S_FPACK]
@@ -423,7 +423,7 @@ def _advance_once(state, slip, sump_temperature, dt, p, d, scratch):
 @njit(cache=True)
 def _advance_term_filters(state, slip, dt, p, d):
     """First-order low-pass (exact for the signal held over dt) of every discovered term
-    that has a time constant, driven by the signal at the start of the step."""
+    that has a time constant, driven by its signal at the last sample (held over the step)."""
     w = min(max(slip, -SLIP_LIMIT), SLIP_LIMIT)
     pressure_mpa = min(state[S_FPACK], d[D_FMAX]) / d[D_AN] * 1e-6
     for j in range(int(p[P.DISC_N])):
