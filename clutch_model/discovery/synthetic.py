@@ -61,12 +61,12 @@ def make_case(seed: int, true_terms: dict | None = None, *, n_runs: int = 9,
               run_duration_s: float = 7.0, white_noise_nm: float = 6.0, coloured_noise_nm: float = 5.0,
               coloured_tau_s: float = 0.3, run_level_spread: float = 0.0, friction_spread: float = 0.05,
               extra_effect: str | None = None, extra_magnitude: float | None = None,
-              base_model: ClutchModel | None = None) -> TruthCase:
+              base_model: ClutchModel | None = None, **spec_kw) -> TruthCase:
     """A synthetic campaign whose true clutch carries ``true_terms`` (term id -> coefficient),
     and the calibrated model a diagnosis would start the discovery from. ``extra_effect``: one
     of the virtual car's own effects outside the catalog instead (its implementation, not the
     discovered mechanism: 'pressure_temperature_cross', or 'torque_ripple' whose phase is
-    random per run)."""
+    random per run). ``spec_kw``: further CampaignSpec fields (rate_hz, ...)."""
     true_terms = dict(true_terms or {})
     base = base_model if base_model is not None else load_model(None)
     if true_terms:
@@ -75,7 +75,7 @@ def make_case(seed: int, true_terms: dict | None = None, *, n_runs: int = 9,
     spec = CampaignSpec(seed=seed, n_runs=n_runs, run_duration_s=run_duration_s,
                         friction_spread=friction_spread, torque_noise_nm=white_noise_nm,
                         torque_drift_nm=coloured_noise_nm, torque_drift_tau_s=coloured_tau_s,
-                        extra_effect=extra_effect, magnitude=extra_magnitude)
+                        extra_effect=extra_effect, magnitude=extra_magnitude, **spec_kw)
     result = synthesize_campaign(spec, base_model=base)
     rng = np.random.default_rng([seed, 7])
     campaign, clean = _campaign_from(result, run_level_spread, rng)
