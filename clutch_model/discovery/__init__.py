@@ -2,7 +2,7 @@
 
 ``discover(campaign, calibrated_model, split, noise_model=None) -> DiscoveryResult``
 (identify.py) over the candidate-term library of terms.py; the plant applies what it finds as
-the mechanism ``discovered`` (clutch_model.plant.discovered).
+the mechanism ``discovered`` (clutch_model.plant.mechanisms.discovered).
 """
 from clutch_model.discovery.heldout import HeldOutVerdict, block_gain_test
 from clutch_model.discovery.identify import DiscoveryResult, discover

@@ -39,8 +39,8 @@ from clutch_model.discovery.heldout import HeldOutVerdict, block_gain_test
 from clutch_model.discovery.terms import Term, TermSignals, default_library, describe, partner
 from clutch_model.errors import DataError
 from clutch_model.plant import kernels as K
-from clutch_model.plant import params as P
-from clutch_model.plant.discovered import Discovered
+from clutch_model.plant import layout as P
+from clutch_model.plant.mechanisms.discovered import Discovered
 from clutch_model.plant.mechanisms import apply_measurement
 from clutch_model.plant.params import ClutchModel
 from clutch_model.replay import replay_runs

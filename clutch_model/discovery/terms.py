@@ -1,6 +1,6 @@
 """Candidate terms with physical meaning, each one object (in the manner of PySINDy's
 feature library, and of the catalog's mechanisms): an id the plant understands
-(clutch_model.plant.discovered), the units of its coefficient, a plain-words reading, its
+(clutch_model.plant.mechanisms.discovered), the units of its coefficient, a plain-words reading, its
 feature function of the plant's own signals, and its kind:
 
 * ``mu``: a multiplier on the friction coefficient, μ_f · (1 + c·g);
@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from clutch_model.plant import kernels as K
-from clutch_model.plant.discovered import parse_term, term_id
+from clutch_model.plant.mechanisms.discovered import parse_term, term_id
 
 # signal name -> (units, words)
 SIGNAL_INFO = {

@@ -8,6 +8,7 @@ import pytest
 
 from clutch_model.errors import ParamsError
 from clutch_model.plant import kernels as K
+from clutch_model.plant.friction import friction_grid
 from clutch_model.plant.mechanisms import make_mechanism
 from clutch_model.plant.params import ClutchModel, load_model, save_model
 from clutch_model.plant.simulate import Plant, simulate, simulate_batch
@@ -24,8 +25,8 @@ def _with(model, terms, coefs):
 
 
 def _base_mu(sim):
-    p = load_model().vector()
-    return K.friction_grid(p, np.abs(np.full(sim.t.size, 4.0)), sim.pressure_mpa, sim.pack_temperature_c)
+    m = load_model()
+    return friction_grid(m.friction_coefficients, m.friction_exponent, np.abs(np.full(sim.t.size, 4.0)), sim.pressure_mpa, sim.pack_temperature_c)
 
 
 @pytest.fixture(scope="module")

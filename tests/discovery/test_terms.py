@@ -6,6 +6,7 @@ import pytest
 from clutch_model.discovery.terms import Term, TermSignals, default_library, describe
 from clutch_model.formats.bag_reader import Campaign, Run
 from clutch_model.plant import kernels as K
+from clutch_model.plant.friction import friction_grid
 from clutch_model.plant.mechanisms import make_mechanism
 from clutch_model.plant.params import load_model
 from clutch_model.plant.simulate import simulate
@@ -54,7 +55,7 @@ def test_features_reproduce_the_plant():
             continue
         model = rc1.with_mechanisms([make_mechanism("discovered", terms=[term.id], coefficients=[c])])
         sim = simulate(model, t, force, slip, sump)
-        base = K.friction_grid(rc1.vector(), np.abs(slip), sim.pressure_mpa, sim.pack_temperature_c)
+        base = friction_grid(rc1.friction_coefficients, rc1.friction_exponent, np.abs(slip), sim.pressure_mpa, sim.pack_temperature_c)
         g = term.feature(TermSignals.from_simulation(camp, sim))
         np.testing.assert_allclose(sim.friction_coefficient / base - 1.0, c * g, rtol=1e-9, atol=1e-12,
                                    err_msg=term.id)
@@ -69,7 +70,7 @@ def test_low_passed_feature_matches_the_plant_filter():
     c = 1e-3
     model = load_model().with_mechanisms([make_mechanism("discovered", terms=[term.id], coefficients=[c])])
     sim = simulate(model, t, force, slip, sump)
-    base = K.friction_grid(load_model().vector(), np.abs(slip), sim.pressure_mpa, sim.pack_temperature_c)
+    base = friction_grid(load_model().friction_coefficients, load_model().friction_exponent, np.abs(slip), sim.pressure_mpa, sim.pack_temperature_c)
     g = term.feature(TermSignals.from_simulation(camp, sim))
     np.testing.assert_allclose(sim.friction_coefficient / base - 1.0, c * g, rtol=1e-9, atol=1e-12)
     assert g[-1] == pytest.approx(sim.power_w[-2] * 1e-3, rel=0.02)   # settled: follows the power

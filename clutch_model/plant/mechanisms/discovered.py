@@ -1,5 +1,7 @@
-"""The `discovered` mechanism: terms found from the data (clutch_model.discovery) applied
-inside the compiled plant, so replay, the batch simulator and the node all apply them.
+"""discovered: terms beyond the catalog found from the data (clutch_model.discovery), applied
+inside the compiled plant, so replay, the batch simulator and the node all apply them. Not a
+catalog entry (``mechanisms.EXTENSIONS``): it has no single magnitude and is not a diagnosis
+candidate; it composes after the catalog's mechanisms.
 
 A model file writes it as
 
@@ -30,8 +32,8 @@ import numpy as np
 
 from clutch_model.errors import ParamsError
 from clutch_model.plant import kernels as K
-from clutch_model.plant import params as P
-from clutch_model.plant.mechanisms import Mechanism
+from clutch_model.plant import layout as P
+from clutch_model.plant.mechanisms.base import Mechanism
 
 SIGNALS = {
     "pressure": K.SIG_PRESSURE,
@@ -76,10 +78,11 @@ class Discovered(Mechanism):
     optional campaign state as friction_degradation's (energy terms carry the campaign)."""
 
     id = "discovered"
-    kind = "plant"
+    path = "friction"              # and an additive part of the transmitted torque
     parameters = ()
     state_keys = ("terms", "coefficients", "energy_history")
     physics = "terms beyond the catalog found from the data: mu_f (1 + sum c g) and torque + sum c g"
+    diagnosis_candidate = False    # found by clutch_model.discovery, not fitted as a catalog candidate
 
     def __post_init__(self):
         super().__post_init__()
