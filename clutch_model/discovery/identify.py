@@ -38,11 +38,12 @@ from clutch_model.diagnosis.fitting import (K_V_SCALE, N_CORR, P_CENTER_MPA, RID
 from clutch_model.discovery.heldout import HeldOutVerdict, block_gain_test
 from clutch_model.discovery.terms import Term, TermSignals, default_library, describe, partner
 from clutch_model.errors import DataError
+from clutch_model.identification.objective import TorqueLeastSquares
 from clutch_model.plant import kernels as K
 from clutch_model.plant import layout as P
 from clutch_model.plant.mechanisms.discovered import Discovered
-from clutch_model.plant.mechanisms import apply_measurement
 from clutch_model.plant.params import ClutchModel
+from clutch_model.prediction import PlantInputs, predict_campaign
 from clutch_model.replay import replay_runs
 
 MAX_TERMS = 4            # sparsity ceiling of the search (the plant holds up to 6)
@@ -197,24 +198,22 @@ def select_terms(y, X, groups, max_terms=MAX_TERMS):
 
 
 # --------------------------------------------------------------------------- joint refit
-class _Refit:
-    """Term coefficients (scaled) + the friction correction, simulated over the campaign."""
+class _Refit(TorqueLeastSquares):
+    """The project's torque least-squares objective over x = the term coefficients (scaled)
+    followed by the friction correction (ridge-held at the anchor's friction), every x
+    simulated over the whole campaign through the one prediction path."""
 
     def __init__(self, base: ClutchModel, campaign, rows, terms, scales, sigma_nm):
         self.base = base
-        self.campaign = campaign
-        self.rows = rows
         self.terms = terms
         self.scales = np.asarray(scales, float)
         self.k = len(terms)
         self.a0 = base.friction_coefficients
         self.others = [m for m in base.mechanisms if m.id != "discovered"]
-        self.ridge = math.sqrt(max(int(rows.sum()), 1)) * sigma_nm / RIDGE_SCALE
-        c = campaign
-        self.inputs = tuple(np.ascontiguousarray(v) for v in (c.t, c.force, c.slip, c.sump, c.run_start))
-        self.energy0 = base.initial_energy_j(campaign.runs[0].start_time_ns)
-        self.y = np.asarray(campaign.torque_measured, float)
-        self._cx, self._cr = None, None
+        self._inputs = PlantInputs.of(campaign)
+        ridge = math.sqrt(max(int(rows.sum()), 1)) * sigma_nm / RIDGE_SCALE
+        super().__init__(self._predict_xs, campaign.torque_measured, rows, ridge=ridge,
+                         ridge_index=slice(self.k, None))
 
     def coefficients(self, x):
         return np.asarray(x[:self.k], float) / self.scales
@@ -225,35 +224,8 @@ class _Refit:
         a = apply_friction_correction(self.a0, x[self.k:])
         return self.base.with_friction(a=a).with_mechanisms(self.others + [mech])
 
-    def predict(self, xs) -> np.ndarray:
-        models = [self.model_at(x) for x in xs]
-        pm = np.ascontiguousarray(np.stack([m.vector() for m in models]))
-        torque, _ = K.run_batch(pm, *self.inputs, float(self.energy0))
-        out = np.empty_like(torque)
-        for j, m in enumerate(models):
-            out[j] = apply_measurement(m.mechanisms, self.campaign.t, torque[j], self.campaign.run_start)
-        return out
-
-    def residuals(self, x):
-        x = np.asarray(x, float)
-        if self._cx is not None and np.array_equal(x, self._cx):
-            return self._cr
-        r = (self.y - self.predict([x])[0])[self.rows]
-        r = np.concatenate([r, self.ridge * x[self.k:]])
-        self._cx, self._cr = x.copy(), r
-        return r
-
-    def jacobian(self, x):
-        x = np.asarray(x, float)
-        r0 = self.residuals(x)
-        steps = np.where(np.arange(x.size) < self.k, 1e-4, 1e-4)
-        preds = self.predict(np.repeat(x[None, :], x.size, axis=0) + np.diag(steps))
-        rs = (self.y[None, :] - preds)[:, self.rows]
-        n = rs.shape[1]
-        jac = np.zeros((r0.size, x.size))
-        jac[:n] = ((rs - r0[None, :n]) / steps[:, None]).T
-        jac[n:, self.k:] = self.ridge * np.eye(N_CORR)
-        return jac
+    def _predict_xs(self, xs) -> np.ndarray:
+        return predict_campaign([self.model_at(x) for x in xs], self._inputs).torque_nm
 
 
 def _ci95(refit: _Refit, x, campaign) -> np.ndarray:
@@ -261,10 +233,10 @@ def _ci95(refit: _Refit, x, campaign) -> np.ndarray:
     scores summed over CI_BLOCK_S blocks of each run (coloured noise within a block)."""
     jac = refit.jacobian(x)
     r = refit.residuals(x)
-    n = int(refit.rows.sum())
+    n = refit.n_data
     a = jac.T @ jac
-    t = np.asarray(campaign.t)[refit.rows]
-    run = np.asarray(campaign.run_index)[refit.rows]
+    t = np.asarray(campaign.t)[refit.mask]
+    run = np.asarray(campaign.run_index)[refit.mask]
     blk = run * 1_000_000 + np.floor((t - t.min()) / CI_BLOCK_S).astype(np.int64)
     _, lab = np.unique(blk, return_inverse=True)
     scores = jac[:n] * r[:n, None]
