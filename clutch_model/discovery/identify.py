@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Callable
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -52,7 +53,9 @@ MIN_GROUPS = 3
 SPAN_GROUPS = 6          # a campaign of fewer runs is cut into this many time spans
 REFIT_NFEV = 30
 CI_BLOCK_S = 2.0
+CI_MIN_RUN_CLUSTERS = 5  # with this many fit runs the intervals are cluster-robust over runs
 RUN_CORRECTION_MAX = 0.3
+MATERIAL_FRAC = 0.2      # a term's effect must reach 20 % of the RMS of what remains (4 % of its variance)
 
 
 @dataclass
@@ -230,19 +233,26 @@ class _Refit(TorqueLeastSquares):
 
 def _ci95(refit: _Refit, x, campaign) -> np.ndarray:
     """Half-widths of 95 % intervals of the term coefficients: sandwich covariance with the
-    scores summed over CI_BLOCK_S blocks of each run (coloured noise within a block)."""
+    scores summed per run (CI_MIN_RUN_CLUSTERS or more fit runs: an effect that is not the same
+    from run to run, e.g. a slow ripple whose phase changes, is not taken for a precise one) or
+    else over CI_BLOCK_S blocks of each run (coloured noise within a block), scaled by
+    G/(G-1) for G clusters."""
     jac = refit.jacobian(x)
     r = refit.residuals(x)
     n = refit.n_data
     a = jac.T @ jac
     t = np.asarray(campaign.t)[refit.mask]
     run = np.asarray(campaign.run_index)[refit.mask]
-    blk = run * 1_000_000 + np.floor((t - t.min()) / CI_BLOCK_S).astype(np.int64)
+    if np.unique(run).size >= CI_MIN_RUN_CLUSTERS:
+        blk = run          # clusters = runs: a term's effect may differ from run to run
+    else:
+        blk = run * 1_000_000 + np.floor((t - t.min()) / CI_BLOCK_S).astype(np.int64)
     _, lab = np.unique(blk, return_inverse=True)
     scores = jac[:n] * r[:n, None]
     s = np.zeros((lab.max() + 1, x.size))
     np.add.at(s, lab, scores)
-    b = s.T @ s
+    g = s.shape[0]
+    b = s.T @ s * (g / (g - 1.0) if g > 1 else 1.0)
     try:
         ainv = np.linalg.inv(a)
     except np.linalg.LinAlgError:
@@ -258,42 +268,40 @@ def _rmse(r, mask):
 
 
 # ----------------------------------------------------------------------------- discover
-def discover(campaign, calibrated_model: ClutchModel, split, noise_model=None, *, library=None,
-             held_out_test=None, valid_mask=None, max_terms: int = MAX_TERMS,
-             friction_anchor: ClutchModel | None = None, progress=None) -> DiscoveryResult:
-    """Search ``library`` (terms.default_library()) for terms that explain what the calibrated
-    model leaves on the fit runs, refit them inside the simulation, and accept them only if
-    ``held_out_test`` (heldout.block_gain_test) says they hold on the held-out rows.
+@dataclass
+class Search:
+    """What the search on the training rows found (no held-out data used): the selected terms
+    refitted jointly with the friction inside the simulation (``fit``: coefficients, ci, model,
+    predicted measured torque on every row), and what it needs to refit subsets (``refit``)."""
 
-    campaign: clutch_model.formats.bag_reader.Campaign (measured torque on its grid);
-    split: held-out run names, a boolean held-out row mask, or an object with ``eval_mask``
-    (or ``held_out`` names); noise_model: optional object with ``sigma_nm`` (the noise level,
-    used to weigh the friction correction's ridge); valid_mask: optional rows to use at all
-    (e.g. rows where the measurement has its own sample); locked rows are always left out.
-    friction_anchor: the model whose friction the refit's correction starts from and is held
-    near (the bench-fitted model the calibration started from; default: the calibrated model).
-    A calibration on car data absorbs whatever part of a missing term its friction polynomials
-    can mimic (friction falling with slip power looks much like k_V rising less with pressure);
-    anchored on the bench friction, the joint refit gives that part back to the term.
-    """
+    library: list
+    chosen: list                      # Term objects (after dropping those whose interval covers 0)
+    fit: dict | None                  # None: nothing selected
+    cv_mse: list
+    dropped: list                     # [(term ids, coefficients, reason)]
+    residual: np.ndarray              # measured - predicted of the starting model, every row
+    valid: np.ndarray                 # rows scored at all (finite, not locked, valid_mask)
+    refit: Callable = field(repr=False, default=None)   # refit(terms) -> fit dict
+
+
+def search(campaign, model: ClutchModel, fit_mask, noise_model=None, *, library=None, valid_mask=None,
+           max_terms: int = MAX_TERMS, friction_anchor: ClutchModel | None = None, progress=None) -> Search:
+    """Steps 1-4 of the module docstring on the training rows ``fit_mask`` only: the sparse
+    search on what ``model`` leaves, the joint refit inside the simulation, and the dropping of
+    terms whose 95 % interval covers 0. See ``discover`` for the arguments."""
     say = progress or (lambda msg: None)
     library = list(library) if library is not None else default_library()
-    test = held_out_test or block_gain_test
-    eval_mask = _eval_mask(split, campaign)
-
-    say("discovery: simulating the calibrated model")
-    rep = replay_runs(calibrated_model, campaign)
+    say("discovery: simulating the model so far")
+    rep = replay_runs(model, campaign)
     sim = rep.sim
     resid = np.asarray(campaign.torque_measured, float) - rep.torque_sim
     valid = np.isfinite(resid) & ~np.asarray(sim.locked, bool)
     if valid_mask is not None:
         valid &= np.asarray(valid_mask, bool)
-    fit_rows = valid & ~eval_mask
-    eval_rows = valid & eval_mask
-    if fit_rows.sum() < 50 or eval_rows.sum() < 10:
-        raise DataError("discovery needs slipping rows with a measured torque on both fit and held-out data")
+    fit_rows = valid & np.asarray(fit_mask, bool)
+    if fit_rows.sum() < 50:
+        raise DataError("discovery needs slipping rows with a measured torque on the fit data")
     sigma = _noise_sigma(noise_model, resid, np.asarray(campaign.run_start, bool))
-    base_rmse = _rmse(resid, eval_rows)
 
     # ---- regressors on the fit rows, friction directions projected out
     sig = TermSignals.from_simulation(campaign, sim)
@@ -318,33 +326,76 @@ def discover(campaign, calibrated_model: ClutchModel, split, noise_model=None, *
             chosen.append(p)
     chosen = chosen[:P.MAX_DISCOVERED_TERMS]
 
+    lib_ids = [t.id for t in library]
+    anchor = model if friction_anchor is None else friction_anchor.with_mechanisms(model.mechanisms)
+
+    def refit(terms):
+        return _refit_terms(terms, lib_ids, x_perp, y_perp, sig, sim, fit_rows, anchor, campaign, sigma, say)
+
+    out = Search(library=library, chosen=chosen, fit=None, cv_mse=cv_mse, dropped=[], residual=resid,
+                 valid=valid, refit=refit)
+    # linear start, joint refit inside the simulation; terms whose 95 % interval covers 0 are
+    # dropped and the rest refitted (a ripple pair stays while either half holds)
+    while chosen:
+        fit = refit(chosen)
+        keep = _significant(chosen, fit["ci"])
+        why = "95 % interval covers 0"
+        if len(keep) == len(chosen):
+            keep = _material(chosen, fit, sig, campaign, fit_rows)
+            why = f"its effect is below {100 * MATERIAL_FRAC:.0f} % of what remains (immaterial)"
+        if len(keep) == len(chosen):
+            out.chosen, out.fit = chosen, fit
+            break
+        out.dropped.append(([t.id for t in chosen], list(fit["coefficients"]),
+                            "dropped: " + ", ".join(t.id for t in chosen if t not in keep) + f" ({why})"))
+        chosen = keep
+    if not chosen:
+        out.chosen = []
+    return out
+
+
+def discover(campaign, calibrated_model: ClutchModel, split, noise_model=None, *, library=None,
+             held_out_test=None, valid_mask=None, max_terms: int = MAX_TERMS,
+             friction_anchor: ClutchModel | None = None, progress=None) -> DiscoveryResult:
+    """Search ``library`` (terms.default_library()) for terms that explain what the calibrated
+    model leaves on the fit runs, refit them inside the simulation, and accept them only if
+    ``held_out_test`` (heldout.block_gain_test) says they hold on the held-out rows.
+
+    campaign: clutch_model.formats.bag_reader.Campaign (measured torque on its grid);
+    split: held-out run names, a boolean held-out row mask, or an object with ``eval_mask``
+    (or ``held_out`` names); noise_model: optional object with ``sigma_nm`` (the noise level,
+    used to weigh the friction correction's ridge); valid_mask: optional rows to use at all
+    (e.g. rows where the measurement has its own sample); locked rows are always left out.
+    friction_anchor: the model whose friction the refit's correction starts from and is held
+    near (the bench-fitted model the calibration started from; default: the calibrated model).
+    A calibration on car data absorbs whatever part of a missing term its friction polynomials
+    can mimic (friction falling with slip power looks much like k_V rising less with pressure);
+    anchored on the bench friction, the joint refit gives that part back to the term.
+    """
+    library = list(library) if library is not None else default_library()
+    test = held_out_test or block_gain_test
+    eval_mask = _eval_mask(split, campaign)
+    found = search(campaign, calibrated_model, ~eval_mask, noise_model, library=library, valid_mask=valid_mask,
+                   max_terms=max_terms, friction_anchor=friction_anchor, progress=progress)
+    resid, valid, cv_mse = found.residual, found.valid, found.cv_mse
+    eval_rows = valid & eval_mask
+    if eval_rows.sum() < 10:
+        raise DataError("discovery needs slipping rows with a measured torque on the held-out data")
+    base_rmse = _rmse(resid, eval_rows)
+    tried = [Tried(ids, coefs, math.nan, HeldOutVerdict(False, 0.0, base_rmse, math.nan, 0.0, "-", reason))
+             for ids, coefs, reason in found.dropped]
     empty = DiscoveryResult(accepted=False, terms=[], coefficients=np.zeros(0), parameters_ci95={},
                             readings=[], evidence="", rmse_nm={"calibrated": base_rmse, "extended": base_rmse},
-                            gain_pct=0.0, model=None, verdict=None, cv_mse=cv_mse, base_residual=resid)
-    if not chosen:
+                            gain_pct=0.0, model=None, verdict=None, tried=tried, cv_mse=cv_mse,
+                            base_residual=resid)
+    if found.fit is None:
         empty.evidence = ("Discovery: the sparse search over "
                           f"{len(library)} candidate terms found none that predicts the calibrated model's "
                           "residual across fit runs better than nothing (grouped cross-validation, "
-                          "one-standard-error rule).")
+                          "one-standard-error rule, 95 % intervals excluding 0).")
         return empty
-
-    # ---- linear start, then the joint refit inside the simulation; terms whose 95 % interval
-    # covers 0 are dropped and the rest refitted (a ripple pair stays while either half holds)
-    lib_ids = [t.id for t in library]
-    anchor = calibrated_model if friction_anchor is None else \
-        friction_anchor.with_mechanisms(calibrated_model.mechanisms)
+    chosen, fit, keep = found.chosen, found.fit, found.chosen
     base_eval = np.where(valid, resid, np.nan)
-    tried = []
-    while True:
-        fit = _refit_terms(chosen, lib_ids, x_perp, y_perp, sig, sim, fit_rows, anchor, campaign, sigma, say)
-        keep = _significant(chosen, fit["ci"])
-        if len(keep) == len(chosen) or not keep:
-            break
-        tried.append(Tried([t.id for t in chosen], list(fit["coefficients"]), math.nan,
-                           HeldOutVerdict(False, 0.0, base_rmse, math.nan, 0.0, "-",
-                                          "dropped: " + ", ".join(t.id for t in chosen if t not in keep)
-                                          + " (95 % interval covers 0)")))
-        chosen = keep
     resid_ext = np.where(valid, np.asarray(campaign.torque_measured, float) - fit["predicted"], np.nan)
     verdict = test(campaign, eval_rows, base_eval, resid_ext)
     # each term (a ripple pair as one) must earn its place on the held-out data too: the
@@ -353,7 +404,7 @@ def discover(campaign, calibrated_model: ClutchModel, split, noise_model=None, *
         weakest = None
         for group in _term_groups(chosen):
             rest = [t for t in chosen if t not in group]
-            fit_r = _refit_terms(rest, lib_ids, x_perp, y_perp, sig, sim, fit_rows, anchor, campaign, sigma, say)
+            fit_r = found.refit(rest)
             resid_r = np.where(valid, np.asarray(campaign.torque_measured, float) - fit_r["predicted"], np.nan)
             v = test(campaign, eval_rows, resid_r, resid_ext)
             if not v.accepted and (weakest is None or v.z_stat < weakest[1].z_stat):
@@ -430,6 +481,20 @@ def _holds_run_by_run(verdict, terms, coefs, model, campaign, resid_ext, eval_ro
                           f"what remains on the held-out runs still follows the terms: each run would want "
                           f"them changed by {100 * med:.0f} % of their effect (median; at most "
                           f"{100 * RUN_CORRECTION_MAX:.0f} % for an effect that holds from run to run)")
+
+
+def _material(terms, fit, sig, campaign, fit_rows) -> list:
+    """Term groups whose effect on the fit rows (RMS of coefficient x regressor) is at least
+    MATERIAL_FRAC of the RMS of what the extension leaves there."""
+    left = (np.asarray(campaign.torque_measured, float) - fit["predicted"])[fit_rows]
+    left_rms = float(np.sqrt(np.nanmean(left ** 2)))
+    coef = dict(zip([t.id for t in terms], fit["coefficients"]))
+    keep = []
+    for group in _term_groups(terms):
+        effect = sum(coef[t.id] * t.regressor(sig) for t in group)[fit_rows]
+        if float(np.sqrt(np.mean(effect ** 2))) >= MATERIAL_FRAC * left_rms:
+            keep += group
+    return keep
 
 
 def _term_groups(terms) -> list:
