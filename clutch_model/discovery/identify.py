@@ -301,7 +301,7 @@ def search(campaign, model: ClutchModel, fit_mask, noise_model=None, *, library=
     fit_rows = valid & np.asarray(fit_mask, bool)
     if fit_rows.sum() < 50:
         raise DataError("discovery needs slipping rows with a measured torque on the fit data")
-    sigma = _noise_sigma(noise_model, resid, np.asarray(campaign.run_start, bool))
+    sigma = _noise_sigma(noise_model, np.where(fit_rows, resid, np.nan), np.asarray(campaign.run_start, bool))
 
     # ---- regressors on the fit rows, friction directions projected out
     sig = TermSignals.from_simulation(campaign, sim)
