@@ -1,4 +1,4 @@
-"""Offline replay of car-test runs through a model (`clutch-sim replay`).
+"""Offline replay of car-test runs through a model (`clutch-sim replay`; grid and timing: docs/bags.md).
 
 The runs are predicted as one campaign by ``clutch_model.prediction.predict_campaign``: the
 plant restarts at each run (film at initial.film_thickness, pack at the first sump sample,

@@ -2,27 +2,14 @@
 from __future__ import annotations
 
 import html
-import json
-import math
 from pathlib import Path
 
 import numpy as np
 
+from clutch_model.formats.results import jsonable, write_json
 from clutch_model.plant.params import save_model
 from clutch_model.diagnosis import features as F
 from clutch_model.diagnosis.engine import Diagnosis
-
-
-def _finite(x):
-    if isinstance(x, dict):
-        return {k: _finite(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_finite(v) for v in x]
-    if isinstance(x, (float, np.floating)):
-        return float(x) if math.isfinite(x) else None
-    if isinstance(x, np.integer):
-        return int(x)
-    return x
 
 
 def report_dict(d: Diagnosis) -> dict:
@@ -36,7 +23,7 @@ def report_dict(d: Diagnosis) -> dict:
                      "explained_fraction": s.explained if s else None,
                      "z": s.z_stat if s else None, "block_t": s.t_stat if s else None,
                      "significant": s.significant if s else None})
-    return _finite({
+    return jsonable({
         "cause": {"id": d.cause_id, "evidence": d.evidence, "parameters": d.cause_parameters},
         "rmse_nm": {"nominal": d.rmse["nominal"], "calibrated": d.rmse["calibrated"],
                     "extended": d.rmse["extended"], "bench_fit": d.rmse["bench"]},
@@ -174,7 +161,7 @@ def write_report(d: Diagnosis, out_dir) -> dict:
                header="clutch-sim diagnose: calibrated baseline (bench fit + car calibration)")
     save_model(d.extended_model, out / "extended_model.yaml",
                header=f"clutch-sim diagnose: extended model, cause = {d.cause_id}")
-    (out / "report.json").write_text(json.dumps(rep, indent=2, allow_nan=False))
+    write_json(out / "report.json", rep)
     files = _plots(d, out)
     (out / "report.html").write_text(_html(d, rep, files))
     return rep

@@ -1,5 +1,5 @@
 """Car-test runs: reading rosbag2 bags (MCAP or sqlite3 directories, bare .mcap files) with
-rosbags, and putting their samples on the replay grid of CONTRACT.md.
+rosbags, and putting their samples on the replay grid (docs/bags.md).
 
 Grid: one row per `applied_force` message at or after the first sample of every input topic;
 each input is the latest sample at or before the row's time. Samples the ROS node would
@@ -14,19 +14,11 @@ from pathlib import Path
 import numpy as np
 
 from clutch_model.errors import DataError
+from clutch_model.formats.topics import TopicNames
 
 FORCE_MAX_N = 1e6
 SLIP_MAX_RAD_S = 1000.0
 SUMP_RANGE_C = (-40.0, 200.0)
-
-
-@dataclass(frozen=True)
-class TopicNames:
-    applied_force: str = "/clutch/applied_force"
-    slip_speed: str = "/clutch/slip_speed"
-    sump_temperature: str = "/clutch/sump_temperature"
-    measured_torque: str = "/clutch/measured_torque"
-    pack_temperature: str = "/clutch/pack_temperature"
 
 
 @dataclass

@@ -1,4 +1,4 @@
-"""Write car-test bags (CONTRACT.md, "Car-test bags") from arrays, without ROS.
+"""Write car-test bags (docs/bags.md) from arrays, without ROS.
 
 One run = one rosbag2 bag (version 9) written with ``rosbags``:
 

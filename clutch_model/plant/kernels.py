@@ -1,4 +1,4 @@
-"""The plant equations (thesis eq. 3.1-3.18, 4.9-4.14, CONTRACT "pinned" details),
+"""The plant equations (thesis eq. 3.1-3.18, 4.9-4.14, the details pinned in docs/model.md),
 compiled with numba. One set of equations serves the step simulator (node), the
 single-trajectory simulator (replay) and the batch simulator (Monte Carlo).
 
@@ -464,7 +464,7 @@ def _row(k, state, p, d, t, force, slip, sump, run_start, scratch, out):
 
 @njit(cache=True)
 def run_trajectory(p, t, force, slip, sump, run_start, energy0):
-    """Replay timing of CONTRACT.md: row k's outputs come from the state at t_k (integrated
+    """Replay timing (docs/bags.md): row k's outputs come from the state at t_k (integrated
     from t_{k-1} with row k-1's inputs held) and row k's inputs. A run_start row restarts
     the plant (film, pack temperature, actuator states); energy carries over."""
     n = t.size
