@@ -37,7 +37,7 @@ from sklearn.model_selection import GroupKFold
 from clutch_model.diagnosis.fitting import (K_V_SCALE, N_CORR, P_CENTER_MPA, RIDGE_SCALE, THETA_CENTER_C,
                                             THETA_SCALE_C, apply_friction_correction)
 from clutch_model.discovery.heldout import HeldOutVerdict, block_gain_test
-from clutch_model.discovery.terms import Term, TermSignals, default_library, describe, partner
+from clutch_model.discovery.terms import TermSignals, default_library, describe, partner
 from clutch_model.errors import DataError
 from clutch_model.identification.objective import TorqueLeastSquares
 from clutch_model.plant import kernels as K

@@ -5,7 +5,6 @@ import pytest
 
 from clutch_model.discovery.terms import Term, TermSignals, default_library, describe
 from clutch_model.formats.bag_reader import Campaign, Run
-from clutch_model.plant import kernels as K
 from clutch_model.plant.friction import friction_grid
 from clutch_model.plant.mechanisms import make_mechanism
 from clutch_model.plant.params import load_model
