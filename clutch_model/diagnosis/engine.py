@@ -23,6 +23,8 @@ from clutch_model.errors import DataError
 from clutch_model.plant.params import ClutchModel
 from clutch_model.replay import replay_runs
 from clutch_model.formats.bag_reader import Campaign
+from clutch_model.diagnosis.lockup import without_locked_torque
+from clutch_model.diagnosis.measured_time import measured_time_campaign, topics_unaligned
 from clutch_model.plant.simulate import SimResult
 from clutch_model.diagnosis import features as F
 from clutch_model.diagnosis.fitting import CANDIDATE_IDS, CandidateFit, fit_candidate
@@ -125,13 +127,26 @@ def _rmse(resid, mask):
 
 
 def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held_out=None,
-                      candidates=None, calibrate=None, progress=None, bench_info=None) -> Diagnosis:
-    """Diagnose a campaign given the bench-fitted model. ``calibrate(model, fit_campaign)`` may
+                      candidates=None, calibrate=None, progress=None, bench_info=None,
+                      measured_time=None) -> Diagnosis:
+    """Diagnose a campaign given the bench-fitted model. ``measured_time`` (default: when the
+    torque and force topics are not aligned) compares model and measurement at the measured
+    torque's own stamps (``measured_time_campaign``) instead of the replay grid.
+    ``calibrate(model, fit_campaign)`` may
     add a car-data calibration (regression + Monte Carlo) before the shared friction
     correction; it returns (model, info)."""
     tick = time.perf_counter()
     timings = {}
-    campaign = smooth_sump(runs if isinstance(runs, Campaign) else Campaign(list(runs)))
+    campaign = runs if isinstance(runs, Campaign) else Campaign(list(runs))
+    if measured_time is None:
+        measured_time = topics_unaligned(campaign.runs)
+    if measured_time:
+        # compare where the measurement is: rows at the torque's own stamps, inputs
+        # interpolated between their samples (diagnosis.measured_time)
+        campaign = measured_time_campaign(campaign)
+    campaign = smooth_sump(campaign)
+    # lock-up phases (found from the slip data): the driveline sets the torque there
+    campaign, _lockups = without_locked_torque(campaign)
     names = campaign.names
     if not np.isfinite(campaign.torque_measured).any():
         raise DataError("the bags have no /clutch/measured_torque: nothing to diagnose against")

@@ -62,7 +62,8 @@ def test_montecarlo_improves_held_out_rmse(rc1, truth, car_runs, mc_serial):
 def test_montecarlo_save(tmp_path, mc_serial):
     files = mc_serial.save(tmp_path, plot_coefficients=[0, 3])
     names = {p.name for p in files}
-    assert {"samples.npz", "refined_model.yaml", "summary.json", "scatter_a0.png", "scatter_a3.png"} <= names
+    assert {"samples.npz", "refined_model.yaml", "summary.json", "scatter.png"} <= names
+    assert [p.name for p in tmp_path.glob("*.png")] == ["scatter.png"]      # one figure, not one per coefficient
     z = np.load(tmp_path / "samples.npz")
     assert {"samples", "rmse", "accepted", "seed", "spread"} <= set(z.files)
     assert int(z["seed"]) == 5 and float(z["spread"]) == 0.05
@@ -81,3 +82,18 @@ def test_dask_local_cluster_equals_serial(rc1, car_runs):
     assert np.array_equal(serial.rmse, dask.rmse, equal_nan=True)
     assert np.array_equal(serial.refined_a, dask.refined_a)
     assert "LocalCluster" in dask.scheduler
+
+
+def test_montecarlo_scatter_one_figure_a_panel_per_coefficient(tmp_path, mc_serial):
+    import matplotlib.image as mpimg
+
+    from clutch_model.identification.plots import montecarlo_scatter
+
+    two = mpimg.imread(montecarlo_scatter(mc_serial, tmp_path / "two", coefficients=[0, 3])[0]
+                       if (tmp_path / "two").mkdir() is None else None)
+    (tmp_path / "all").mkdir()
+    files = montecarlo_scatter(mc_serial, tmp_path / "all")
+    assert [p.name for p in files] == ["scatter.png"] and len(mc_serial.varied) == 20
+    every = mpimg.imread(files[0])
+    # 20 panels: 5 columns x 4 rows; 2 panels: 2 columns x 1 row
+    assert every.shape[0] > 2.5 * two.shape[0] and every.shape[1] > 2 * two.shape[1]
