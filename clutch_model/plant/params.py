@@ -105,8 +105,11 @@ class ClutchModel:
 
     def initial_energy_j(self, start_time_ns: int) -> float:
         """Dissipated campaign energy when a replay starts at ``start_time_ns``."""
-        m = self.mechanism("friction_degradation")
-        return m.energy_at(start_time_ns) if m is not None else 0.0
+        for mech_id in ("friction_degradation", "discovered"):
+            m = self.mechanism(mech_id)
+            if m is not None and m.values.get("energy_history") is not None:
+                return m.energy_at(start_time_ns)
+        return 0.0
 
     def copy(self) -> "ClutchModel":
         return ClutchModel(copy.deepcopy(self.data), [m.copy() for m in self.mechanisms], self.source)
