@@ -149,7 +149,12 @@ def summary(results) -> dict:
             "named_with_gain_holding": f"{len(held)}/{len(named)}",
             "pass_by_condition_class": {k: f"{a}/{b}" for k, (a, b) in by_class.items()},
             "wall_s_total_cells": sum(w for w in walls if math.isfinite(w)),
-            "diagnose_wall_s_median": sorted(r["wall_s"].get("diagnose", float("nan")) for r in results)[n // 2] if n else None}
+            "diagnose_wall_s_median": _median([r["wall_s"].get("diagnose", float("nan")) for r in results])}
+
+
+def _median(xs):
+    xs = sorted(x for x in xs if isinstance(x, float) and math.isfinite(x))
+    return xs[len(xs) // 2] if xs else None
 
 
 def _json_safe(x):
