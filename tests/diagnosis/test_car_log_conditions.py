@@ -10,8 +10,9 @@ cause is named that the extended model's error on the unseen bags is below the c
 model's (and the parameter is the hidden one); where nothing is named the extended model is
 the calibrated one.
 
-The fast set (9 campaigns + harness checks) took 4.5 min on this 2-core machine under a load
-average of 8 (about 15 s CPU per diagnose); heavier samples are marked slow.
+The fast set (9 campaigns + harness checks) took 4.5 min with the diagnosis of main and 6 min
+with the statistics rewrite in progress, on this 2-core machine under a load average of 7-8
+(15-20 s CPU per diagnose); heavier samples are marked slow.
 CLUTCH_HIDDEN_SEED=<int> draws other magnitudes. bench/bench_diagnose_matrix.py runs the whole
 matrix (every mechanism, pairs, lookalikes x every condition x seeds).
 """
