@@ -735,7 +735,7 @@ def score_against_truth(model: ClutchModel, runs, truth_dir, rate_hz: float = 10
 
     mts = simulate_at_measured_times(model, runs, rate_hz=rate_hz)
     cmp = mts.comparison
-    sq, n, per = 0.0, 0, {}
+    sq, n, per, per_n = 0.0, 0, {}, {}
     for j, name in enumerate(cmp.names):
         side = load_truth_sidecar(Path(truth_dir) / f"{name}.npz")
         sl = cmp.run_slice(j)
@@ -753,5 +753,7 @@ def score_against_truth(model: ClutchModel, runs, truth_dir, rate_hz: float = 10
         ok = cmp.valid[sl] & ~near_lock
         err = cmp.model[sl][ok] - truth[ok]
         per[name] = float(np.sqrt(np.mean(err ** 2))) if err.size else float("nan")
+        per_n[name] = int(err.size)
         sq += float(np.sum(err ** 2)); n += int(err.size)
-    return {"rmse_nm": float(np.sqrt(sq / n)) if n else float("nan"), "runs": per, "samples": n}
+    return {"rmse_nm": float(np.sqrt(sq / n)) if n else float("nan"), "runs": per, "samples": n,
+            "run_samples": per_n}
