@@ -91,6 +91,7 @@ class ParameterSensitivity:
     x: np.ndarray
     jacobian: np.ndarray            # rows x len(x)
     from_x: Sequence[Callable]      # per named parameter: x -> physical value
+    estimator: str = "ols"          # how x was fitted: "ols" (plain least squares) or "gls" (AR-whitened)
 
 
 @dataclass
@@ -275,10 +276,19 @@ def _sandwich_ci(sens: ParameterSensitivity, resid, data: SelectionData, block_s
     from scipy import stats
 
     J = np.asarray(sens.jacobian, float)
+    resid = np.asarray(resid, float)
     mask = data.train_mask & np.isfinite(resid) & np.all(np.isfinite(J), axis=1)
+    if sens.estimator == "gls":      # the sandwich of the whitened regression
+        from clutch_model.diagnosis.noise_model import fit_noise_model, segments_of
+        from clutch_model.diagnosis.structure_test import _whiten_columns
+
+        nm = fit_noise_model(resid, data.run_start, mask)
+        segs = segments_of(np.where(mask, resid, np.nan), data.run_start)
+        resid = nm.innovations(np.where(mask, resid, np.nan), data.run_start)[0]
+        J = _whiten_columns(nm, J, segs)
     lab = _clusters(data, mask, block_s)
     ok = lab >= 0
-    J, r, lab = J[ok], np.asarray(resid, float)[ok], lab[ok]
+    J, r, lab = J[ok], resid[ok], lab[ok]
     G = int(lab.max()) + 1
     bread = J.T @ J
     scores = np.zeros((G, J.shape[1]))
