@@ -1,7 +1,8 @@
 """Causes in sequence: forward selection with a held-out test at every step.
 
 Candidates are objects (catalog mechanisms, and later terms discovered from the data) with one
-method, ``fit(train) -> fitted``; a fitted candidate has ``parameters`` and
+method, ``fit(train) -> fitted`` (and optionally ``refine(fitted, train) -> fitted``, a costlier
+refit tried on the few candidates that fit the training rows best); a fitted candidate has ``parameters`` and
 ``predict(data) -> predicted measured series on all rows`` (the model so far *with* the
 candidate added). Optionally ``sensitivity()`` (ParameterSensitivity) gives the Jacobian of
 the prediction for parameter intervals; without it, intervals come from a delete-a-group
@@ -142,6 +143,12 @@ def _resid(data: SelectionData, fitted) -> np.ndarray:
     return np.asarray(data.y, float) - np.asarray(fitted.predict(data), float)
 
 
+def _train_mse(data: SelectionData, fitted) -> float:
+    r = _resid(data, fitted)
+    ok = data.train_mask & np.isfinite(r)
+    return float(np.mean(r[ok] ** 2)) if ok.any() else math.inf
+
+
 def _compare(data, resid_null, resid_alt, max_order):
     return compare_residuals(resid_null, resid_alt, data.train_mask, data.test_mask, data.run_start, data.t,
                              max_order=max_order)
@@ -158,7 +165,7 @@ def _remainder_test(data, resid, alpha, min_gain_frac, max_order):
 def select_causes(data: SelectionData, baseline, candidates: Sequence, alpha: float = ALPHA,
                   min_gain_frac: float = MIN_GAIN_FRAC, lookalike_alpha: float = LOOKALIKE_ALPHA,
                   max_causes: int = MAX_CAUSES, intervals: bool = True, max_order: int = DEFAULT_MAX_ORDER,
-                  progress=None) -> Selection:
+                  refine_top: int = 3, progress=None) -> Selection:
     """Forward selection of causes (see the module docstring). ``baseline`` is a fitted model
     (``predict(data)``) without any candidate."""
     say = progress or (lambda msg: None)
@@ -170,12 +177,23 @@ def select_causes(data: SelectionData, baseline, candidates: Sequence, alpha: fl
     named: list = []
     steps: list = []
     while remaining and len(named) < max_causes:
-        scores = []
+        train = TrainingSet(data, current, tuple(c.id for c in named))
+        fits = {}
         for cand in remaining:
             say(f"fitting {cand.id}" + (f" on top of {', '.join(c.id for c in named)}" if named else ""))
-            fitted = cand.fit(TrainingSet(data, current, tuple(c.id for c in named)))
-            cmp = _compare(data, resid_cur, _resid(data, fitted), max_order)
-            scores.append(CandidateScore(cand.id, fitted, cmp))
+            fits[cand.id] = cand.fit(train)
+        # the best few on the training rows get a costlier refit (e.g. jointly with the friction)
+        by_train = sorted(remaining, key=lambda c: _train_mse(data, fits[c.id]))
+        for cand in by_train[:refine_top]:
+            if hasattr(cand, "refine"):
+                say(f"refining {cand.id}")
+                better = cand.refine(fits[cand.id], train)
+                if better is not None and _train_mse(data, better) <= _train_mse(data, fits[cand.id]):
+                    fits[cand.id] = better
+        scores = []
+        for cand in remaining:
+            cmp = _compare(data, resid_cur, _resid(data, fits[cand.id]), max_order)
+            scores.append(CandidateScore(cand.id, fits[cand.id], cmp))
         scores.sort(key=lambda s: (not s.comparison.significant(alpha, min_gain_frac), -s.comparison.delta_ll))
         best = scores[0]
         if not best.comparison.significant(alpha, min_gain_frac):
