@@ -165,14 +165,19 @@ def _remainder_test(data, resid, alpha, min_gain_frac, max_order):
 def select_causes(data: SelectionData, baseline, candidates: Sequence, alpha: float = ALPHA,
                   min_gain_frac: float = MIN_GAIN_FRAC, lookalike_alpha: float = LOOKALIKE_ALPHA,
                   max_causes: int = MAX_CAUSES, intervals: bool = True, max_order: int = DEFAULT_MAX_ORDER,
-                  refine_top: int = 3, progress=None) -> Selection:
+                  refine_top: int = 3, structure_min_gain_frac: float | None = None,
+                  progress=None) -> Selection:
     """Forward selection of causes (see the module docstring). ``baseline`` is a fitted model
-    (``predict(data)``) without any candidate."""
+    (``predict(data)``) without any candidate. ``min_gain_frac``: materiality of a candidate
+    (cut of the held-out innovation variance); ``structure_min_gain_frac``: of structure the
+    flexible residual model finds (default: the same)."""
+    if structure_min_gain_frac is None:
+        structure_min_gain_frac = min_gain_frac
     say = progress or (lambda msg: None)
     current = baseline
     resid_cur = _resid(data, current)
     say("structure test of the baseline residual")
-    base_struct = _remainder_test(data, resid_cur, alpha, min_gain_frac, max_order)
+    base_struct = _remainder_test(data, resid_cur, alpha, structure_min_gain_frac, max_order)
     remaining = list(candidates)
     named: list = []
     steps: list = []
@@ -214,7 +219,7 @@ def select_causes(data: SelectionData, baseline, candidates: Sequence, alpha: fl
         remaining = [c for c in remaining if c.id != best.id]
 
     say("structure test of what remains")
-    rem_struct = _remainder_test(data, resid_cur, alpha, min_gain_frac, max_order) if named else base_struct
+    rem_struct = _remainder_test(data, resid_cur, alpha, structure_min_gain_frac, max_order) if named else base_struct
     structured_left = bool(rem_struct is not None and rem_struct.structured)
     named_ids = {c.id for c in named}
     unresolved = sorted({lk for s in steps for lk in s.lookalikes if lk not in named_ids})
