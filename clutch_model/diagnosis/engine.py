@@ -42,7 +42,7 @@ from clutch_model.diagnosis.structure_test import input_features
 # explains (unexplained) by STRUCTURE_GAIN_FRAC (a friction calibration never fits a car
 # perfectly: a residual misfit of a few % of the noise variance is calibration, not a cause).
 NAMED_GAIN_FRAC = 0.005
-STRUCTURE_GAIN_FRAC = 0.03
+STRUCTURE_GAIN_FRAC = 0.01
 ALPHA = 1e-3
 
 
@@ -185,6 +185,18 @@ def residual_library(campaign: Campaign, sim: SimResult, torque: np.ndarray):
     return input_features(signals, campaign.t, campaign.run_start, torque=torque)
 
 
+def ripple_columns(campaign: Campaign, torque: np.ndarray):
+    """Once-per-revolution columns (additive and torque-proportional sin/cos of the slip
+    angle), fitted per run by per_run_structure_test (the phase differs from run to run)."""
+    angle = np.zeros(campaign.t.size)
+    for _, sl in campaign.slices():
+        t = campaign.t[sl]
+        angle[sl] = np.cumsum(campaign.slip[sl] * np.diff(t, prepend=t[0]))
+    tq = torque / (np.nanstd(torque) or 1.0)
+    names = ["sin slip angle", "cos slip angle", "torque x sin slip angle", "torque x cos slip angle"]
+    return names, np.column_stack([np.sin(angle), np.cos(angle), tq * np.sin(angle), tq * np.cos(angle)])
+
+
 def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held_out=None,
                       candidates=None, calibrate=None, progress=None, bench_info=None,
                       checkpoint=None) -> Diagnosis:
@@ -257,6 +269,7 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
     data = SelectionData(y=campaign.torque_measured, t=campaign.t, run_start=campaign.run_start,
                          train_mask=fit_mask & scored, test_mask=eval_mask & scored, features=lib,
                          feature_names=lib_names, groups=campaign.run_index)
+    data.per_run_feature_names, data.per_run_features = ripple_columns(campaign, calibrated.predicted)
     base = baseline_fit(calibrated, cal_base, ctx, fit_mask & scored)
     sel = select_causes(data, base, [MechanismCandidate(cid, ctx) for cid in ids], alpha=ALPHA,
                         min_gain_frac=NAMED_GAIN_FRAC, structure_min_gain_frac=STRUCTURE_GAIN_FRAC, progress=say)

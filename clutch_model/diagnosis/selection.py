@@ -32,8 +32,8 @@ import numpy as np
 
 from clutch_model.diagnosis.noise_model import DEFAULT_MAX_ORDER
 from clutch_model.diagnosis.structure_test import (ALPHA, BLOCK_S, MIN_GAIN_FRAC, PredictiveComparison,
-                                                   StructureResult, block_labels,
-                                                   compare_residuals, structure_test)
+                                                   StructureResult, block_labels, compare_residuals,
+                                                   per_run_structure_test, structure_test)
 
 LOOKALIKE_ALPHA = 0.01   # a runner-up is a lookalike unless the best beats it at this level (one-sided)
 MAX_CAUSES = 3
@@ -50,6 +50,8 @@ class SelectionData:
     test_mask: np.ndarray
     features: np.ndarray | None = None    # input library for the remainder test (structure_test)
     feature_names: list = field(default_factory=list)
+    per_run_features: np.ndarray | None = None   # columns with per-run coefficients (slip-angle ripple)
+    per_run_feature_names: list = field(default_factory=list)
     groups: np.ndarray | None = None      # jackknife groups of training rows (run index); None: blocks
     payload: object = None                # whatever the candidates need (the campaign, models, ...)
 
@@ -155,11 +157,22 @@ def _compare(data, resid_null, resid_alt, max_order):
 
 
 def _remainder_test(data, resid, alpha, min_gain_frac, max_order):
+    """The flexible residual model, and the per-run one when there are per-run columns (each
+    at alpha / 2); the more significant result is returned."""
     if data.features is None:
         return None
-    return structure_test(resid, data.features, data.train_mask, data.test_mask, data.run_start, data.t,
-                          feature_names=data.feature_names, alpha=alpha, min_gain_frac=min_gain_frac,
-                          max_order=max_order)
+    tests = 2 if data.per_run_features is not None else 1
+    res = structure_test(resid, data.features, data.train_mask, data.test_mask, data.run_start, data.t,
+                         feature_names=data.feature_names, alpha=alpha / tests, min_gain_frac=min_gain_frac,
+                         max_order=max_order)
+    if data.per_run_features is not None:
+        per_run = per_run_structure_test(resid, data.per_run_features, data.train_mask, data.test_mask,
+                                         data.run_start, data.t, feature_names=data.per_run_feature_names,
+                                         alpha=alpha / tests, min_gain_frac=min_gain_frac, max_order=max_order)
+        if per_run.structured and not res.structured or per_run.comparison.t_stat > res.comparison.t_stat:
+            if per_run.structured or not res.structured:
+                res = per_run
+    return res
 
 
 def select_causes(data: SelectionData, baseline, candidates: Sequence, alpha: float = ALPHA,

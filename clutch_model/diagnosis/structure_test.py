@@ -326,3 +326,46 @@ def input_features(signals: dict, t: np.ndarray, run_start: np.ndarray, torque: 
             names.append(f"force low-pass {tau:g} s - force")
             cols.append(_lowpass(f, t, run_start, tau) - f)
     return names, np.column_stack(cols)
+
+
+def per_run_structure_test(residual: np.ndarray, X: np.ndarray, train_mask, test_mask, run_start, t,
+                           feature_names=None, alpha: float = ALPHA, min_gain_frac: float = MIN_GAIN_FRAC,
+                           block_s: float = BLOCK_S, max_order: int = DEFAULT_MAX_ORDER) -> StructureResult:
+    """Structure the inputs predict up to per-run coefficients (a once-per-revolution ripple
+    whose phase differs from run to run: sin and cos of the slip angle, with coefficients of
+    each run's own). Within each held-out run, each block is predicted from a GLS fit of the
+    columns X on that run's *other* blocks (cross-fitting; rows whose AR history reaches into
+    the predicted block are left out of its fit), and the correction is then tested like any
+    candidate against the noise model fitted on the training rows."""
+    r = np.asarray(residual, float)
+    X = np.asarray(X, float)
+    ok_train = train_mask & np.isfinite(r)
+    nm = fit_noise_model(r, run_start, ok_train, max_order=max_order)
+    rows_all = test_mask & np.isfinite(r) & np.all(np.isfinite(X), axis=1)
+    scale = np.sqrt(np.mean(X[rows_all] ** 2, axis=0)) if rows_all.any() else np.ones(X.shape[1])
+    Xs = X / np.where(scale > 0, scale, 1.0)
+    lab = block_labels(t, rows_all, run_start, block_s)
+    run_id = np.cumsum(run_start) - 1
+    corr = np.zeros(r.size)
+    p = nm.order
+    for j in np.unique(run_id[rows_all]):
+        rows_j = rows_all & (run_id == j)
+        segs = segments_of(np.where(rows_j, r, np.nan), run_start)
+        ew = nm.innovations(np.where(rows_j, r, np.nan), run_start)[0]
+        Xw = _whiten_columns(nm, Xs, segs)
+        blocks_j = np.unique(lab[rows_j])
+        if blocks_j.size < 3:
+            continue
+        for b in blocks_j:
+            inb = rows_j & (lab == b)
+            idx = np.flatnonzero(inb)
+            reach = np.zeros(r.size, bool)
+            reach[idx[-1] + 1:min(idx[-1] + 1 + p, r.size)] = True   # history inside block b
+            fit = rows_j & ~inb & ~reach & np.isfinite(ew)
+            A = Xw[fit]
+            lam = 1e-6 * float(np.trace(A.T @ A)) / max(A.shape[1], 1)
+            beta = np.linalg.solve(A.T @ A + lam * np.eye(A.shape[1]), A.T @ ew[fit])
+            corr[inb] = Xs[inb] @ beta
+    cmp = candidate_test(r, corr, train_mask, test_mask, run_start, t, block_s=block_s, max_order=max_order)
+    return StructureResult(structured=cmp.significant(alpha, min_gain_frac), comparison=cmp, coefficients=None,
+                           feature_names=list(feature_names or []), prediction=corr)
