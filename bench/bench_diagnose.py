@@ -26,8 +26,14 @@ os.environ.setdefault("NUMBA_CACHE_DIR", str(Path(__file__).resolve().parents[1]
 
 import numpy as np  # noqa: E402
 
-CASES = ["none", "actuator_lag", "actuator_hysteresis", "spring_preload", "friction_degradation",
-         "torque_offset", "transport_delay", "drag_torque", "torque_ripple", "pressure_temperature_cross"]
+def _cases():
+    from clutch_model.plant.mechanisms import DIAGNOSIS_CANDIDATES
+    from clutch_model.virtual_car.campaign import EXTRA_EFFECTS
+
+    return ["none", *DIAGNOSIS_CANDIDATES, *EXTRA_EFFECTS]
+
+
+CASES = _cases()
 
 
 def campaign(tmp: Path, seed: int, case: str, n_runs=9, duration=9.0, extra_runs=0):

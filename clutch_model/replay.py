@@ -1,9 +1,9 @@
-"""Offline replay of car-test runs through a model (CONTRACT.md, `clutch-sim replay`).
+"""Offline replay of car-test runs through a model (`clutch-sim replay`).
 
-The runs are simulated as one campaign in log-time order: the plant restarts at each run
-(film at initial.film_thickness, pack at the first sump sample, actuator states neutral)
-while the dissipated energy carries from one run to the next. ``torque_sim`` predicts the
-*measured* torque: the model's measurement mechanisms are applied.
+The runs are predicted as one campaign by ``clutch_model.prediction.predict_campaign``: the
+plant restarts at each run (film at initial.film_thickness, pack at the first sump sample,
+actuator states neutral) while the dissipated energy carries from one run to the next.
+``torque_sim`` predicts the *measured* torque: the model's measurement mechanisms are applied.
 """
 from __future__ import annotations
 
@@ -14,12 +14,13 @@ from pathlib import Path
 
 import numpy as np
 
-from clutch_model.plant.params import ClutchModel
 from clutch_model.formats.bag_reader import Campaign
-from clutch_model.plant.simulate import SimResult, predict_measured_torque, simulate
+from clutch_model.plant.params import ClutchModel
+from clutch_model.plant.simulate import SimResult
+from clutch_model.prediction import predict_campaign
 
 
-@dataclass
+@dataclass(frozen=True)
 class ReplayResult:
     campaign: Campaign
     sim: SimResult               # plant signals on the concatenated grid
@@ -66,12 +67,8 @@ def replay_runs(model: ClutchModel, runs, energy0_j: float | None = None) -> Rep
     starts at ``energy0_j``, by default what the model's campaign history knows at the first
     run's start (0 for a fresh model)."""
     campaign = runs if isinstance(runs, Campaign) else Campaign(list(runs))
-    if energy0_j is None:
-        energy0_j = model.initial_energy_j(campaign.runs[0].start_time_ns)
-    sim = simulate(model, campaign.t, campaign.force, campaign.slip, campaign.sump,
-                   run_start=campaign.run_start, energy0_j=energy0_j)
-    torque = predict_measured_torque(model, campaign.t, sim.torque_nm, campaign.run_start)
-    return ReplayResult(campaign=campaign, sim=sim, torque_sim=torque)
+    pred = predict_campaign(model, campaign, energy0_j=energy0_j)
+    return ReplayResult(campaign=campaign, sim=pred.sim, torque_sim=pred.torque_nm)
 
 
 def write_replay_csv(result: ReplayResult, path) -> Path:

@@ -10,10 +10,12 @@ additive friction correction within the thesis' polynomial structure,
 
 i.e. the 10 coefficients of mu_C and k_V that car runs (slip >> omega_S) can identify, moved
 in a well-conditioned basis; the correction is exact in a0..a19. A weak ridge keeps it small
-where the runs do not constrain it. Residuals are measured minus predicted *measured* torque on
-the fit runs only; the whole campaign is always simulated (in time order) so that state that
-carries between runs (dissipated energy) sees every run's inputs. Jacobians are forward
-differences computed as one parallel batch of perturbed parameter sets.
+where the runs do not constrain it. The objective is the one torque least-squares objective
+(``identification.objective``): predicted *measured* torque (``prediction.predict_campaign``)
+minus measured, on the fit runs only; the whole campaign is always simulated (in time order,
+energy from 0 at its start) so that state that carries between runs (dissipated energy) sees
+every run's inputs. Each mechanism brings its own search space (``Mechanism.search_space``).
+Jacobians are forward differences computed as one parallel batch of perturbed parameter sets.
 """
 from __future__ import annotations
 
@@ -23,10 +25,11 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import least_squares
 
-from clutch_model.plant import kernels as K
-from clutch_model.plant.mechanisms import CATALOG, delay_signal, make_mechanism
-from clutch_model.plant.params import FRICTION_A, ClutchModel
 from clutch_model.formats.bag_reader import Campaign
+from clutch_model.identification.objective import TorqueLeastSquares
+from clutch_model.plant.mechanisms import CATALOG, DIAGNOSIS_CANDIDATES, CampaignScale, ParamSpec, make_mechanism
+from clutch_model.plant.params import ClutchModel
+from clutch_model.prediction import PlantInputs, predict_campaign
 
 N_CORR = 10
 P_CENTER_MPA = 1.0
@@ -56,45 +59,9 @@ def apply_friction_correction(a: np.ndarray, delta) -> np.ndarray:
     return a
 
 
-@dataclass
-class ParamSpec:
-    """How a mechanism parameter is searched: transform, bounds and a start grid."""
-    name: str
-    log: bool
-    lo: float
-    hi: float
-    grid: np.ndarray
-
-    def to_x(self, v):
-        return math.log(v) if self.log else float(v)
-
-    def from_x(self, x):
-        return math.exp(x) if self.log else float(x)
-
-
 def search_space(mech_id: str, campaign: Campaign, energy_total_j: float, torque_scale: float):
-    """Physical search ranges of each catalog mechanism (start grids span what a car shows)."""
-    fmax = float(np.nanmax(campaign.force)) if campaign.force.size else 1e4
-    if mech_id == "actuator_lag":
-        return [ParamSpec("tau_s", True, 1e-4, 2.0, np.geomspace(0.005, 1.0, 10))]
-    if mech_id == "actuator_hysteresis":
-        return [ParamSpec("ratio", True, 1e-4, 0.9, np.geomspace(0.005, 0.5, 10))]
-    if mech_id == "spring_preload":
-        hi = max(fmax, 100.0)
-        return [ParamSpec("preload_n", True, 1.0, hi, np.geomspace(20.0, 0.5 * hi, 10))]
-    if mech_id == "friction_degradation":
-        e = max(energy_total_j, 1.0)
-        return [ParamSpec("energy_scale_j", True, 1e-3 * e, 1e6 * e, e * np.geomspace(0.3, 300.0, 10))]
-    if mech_id == "torque_offset":
-        s = max(torque_scale, 1.0)
-        return [ParamSpec("offset_nm", False, -s, s, np.linspace(-0.2 * s, 0.2 * s, 11))]
-    if mech_id == "transport_delay":
-        return [ParamSpec("delay_s", True, 1e-4, 2.0, np.geomspace(0.003, 0.8, 12))]
-    if mech_id == "drag_torque":
-        wmax = max(float(np.nanmax(np.abs(campaign.slip))), 0.1)
-        s = max(torque_scale, 1.0) / wmax
-        return [ParamSpec("coeff_nm_per_rad_s", False, -s, s, np.linspace(-0.2 * s, 0.2 * s, 11))]
-    raise KeyError(mech_id)
+    """The mechanism's own search space on this campaign (start grids span what a car shows)."""
+    return CATALOG[mech_id].search_space(CampaignScale.of(campaign, energy_total_j, torque_scale))
 
 
 @dataclass
@@ -111,27 +78,25 @@ class CandidateFit:
     evaluations: int = 0
 
 
-class CampaignObjective:
-    """Builds models from a parameter vector x and evaluates residuals in batches."""
+class CampaignObjective(TorqueLeastSquares):
+    """The torque least-squares objective of one candidate: x = the mechanism's parameters
+    (in their search transform) followed by the friction correction."""
 
     def __init__(self, base: ClutchModel, campaign: Campaign, fit_mask: np.ndarray, mech_id: str | None,
                  specs, fit_friction: bool = True, noise_sigma_nm: float = 1.0):
         self.base = base
         self.campaign = campaign
-        self.mask = fit_mask & np.isfinite(campaign.torque_measured)
         self.mech_id = mech_id
         self.specs = specs or []
         self.fit_friction = fit_friction
         self.a0 = base.friction_coefficients
         self.n_mech = len(self.specs)
-        n_fit = int(self.mask.sum())
-        self.ridge = math.sqrt(max(n_fit, 1)) * noise_sigma_nm / RIDGE_SCALE if fit_friction else 0.0
-        self.evaluations = 0
-        self._cache_x = None
-        self._cache_r = None
-        c = campaign
-        self._inputs = (np.ascontiguousarray(c.t), np.ascontiguousarray(c.force), np.ascontiguousarray(c.slip),
-                        np.ascontiguousarray(c.sump), np.ascontiguousarray(c.run_start))
+        mask = fit_mask & np.isfinite(campaign.torque_measured)
+        n_fit = int(mask.sum())
+        ridge = math.sqrt(max(n_fit, 1)) * noise_sigma_nm / RIDGE_SCALE if fit_friction else 0.0
+        self._plant_inputs = PlantInputs.of(campaign)
+        super().__init__(self._predict_xs, campaign.torque_measured, mask, ridge=ridge,
+                         ridge_index=slice(self.n_mech, None), steps=self._fd_steps)
 
     def model_at(self, x) -> ClutchModel:
         x = np.asarray(x, dtype=float)
@@ -142,49 +107,17 @@ class CampaignObjective:
         delta = x[self.n_mech:] if self.fit_friction else np.zeros(N_CORR)
         return self.base.with_friction(a=apply_friction_correction(self.a0, delta)).with_mechanisms(mechs)
 
-    def predict(self, xs) -> np.ndarray:
-        """Predicted measured torque on the whole campaign for each row of xs."""
-        models = [self.model_at(x) for x in xs]
-        pm = np.ascontiguousarray(np.stack([m.vector() for m in models]))
-        torque, _ = K.run_batch(pm, *self._inputs, 0.0)
-        self.evaluations += len(models)
-        out = np.empty_like(torque)
-        for j, m in enumerate(models):
-            y = torque[j]
-            for mech in m.mechanisms:
-                if mech.kind == "measurement":
-                    y = mech.apply_to_measurement(self.campaign.t, y, self.campaign.run_start)
-            out[j] = y
-        return out
+    def _predict_xs(self, xs) -> np.ndarray:
+        """Predicted measured torque on the whole campaign (energy from 0 at its start)."""
+        return predict_campaign([self.model_at(x) for x in xs], self._plant_inputs, energy0_j=0.0).torque_nm
 
-    def residuals(self, x) -> np.ndarray:
-        x = np.asarray(x, dtype=float)
-        if self._cache_x is not None and np.array_equal(x, self._cache_x):
-            return self._cache_r
-        pred = self.predict([x])[0]
-        r = (self.campaign.torque_measured - pred)[self.mask]
-        if self.ridge:
-            r = np.concatenate([r, self.ridge * x[self.n_mech:]])
-        self._cache_x, self._cache_r = x.copy(), r
-        return r
-
-    def jacobian(self, x) -> np.ndarray:
-        x = np.asarray(x, dtype=float)
-        r0 = self.residuals(x)
+    def _fd_steps(self, x) -> np.ndarray:
         steps = np.where(np.arange(x.size) < self.n_mech, 1e-3 * np.maximum(np.abs(x), 1.0), 1e-4)
         for j, s in enumerate(self.specs):
-            lo, hi = (math.log(s.lo), math.log(s.hi)) if s.log else (s.lo, s.hi)
+            hi = math.log(s.hi) if s.log else s.hi
             if x[j] + steps[j] > hi:
                 steps[j] = -steps[j]
-        xs = np.repeat(x[None, :], x.size, axis=0) + np.diag(steps)
-        preds = self.predict(xs)
-        rs = (self.campaign.torque_measured[None, :] - preds)[:, self.mask]
-        n = rs.shape[1]
-        jac = np.zeros((r0.size, x.size))
-        jac[:n] = ((rs - r0[None, :n]) / steps[:, None]).T
-        if self.ridge:
-            jac[n:, self.n_mech:] = self.ridge * np.eye(x.size - self.n_mech)
-        return jac
+        return steps
 
     def bounds(self):
         lo = [math.log(s.lo) if s.log else s.lo for s in self.specs]
@@ -214,7 +147,7 @@ def fit_candidate(base: ClutchModel, campaign: Campaign, fit_mask: np.ndarray, m
         grid = np.array([[s.to_x(v) for v in s.grid] for s in specs]).T  # 1-parameter mechanisms
         xs = np.hstack([grid, np.zeros((grid.shape[0], n_corr))])
         preds = obj.predict(xs)
-        sse = np.nansum(((campaign.torque_measured[None, :] - preds)[:, obj.mask]) ** 2, axis=1)
+        sse = np.nansum(obj.data_residuals(preds) ** 2, axis=1)
         x0 = xs[int(np.argmin(sse))]
     else:
         x0 = np.zeros(n_corr)
@@ -235,4 +168,6 @@ def fit_candidate(base: ClutchModel, campaign: Campaign, fit_mask: np.ndarray, m
                         evaluations=obj.evaluations)
 
 
-CANDIDATE_IDS = list(CATALOG)
+CANDIDATE_IDS = list(DIAGNOSIS_CANDIDATES)
+__all__ = ["CANDIDATE_IDS", "CampaignObjective", "CandidateFit", "ParamSpec", "apply_friction_correction",
+           "fit_candidate", "search_space"]

@@ -1,6 +1,6 @@
-"""Batch evaluation of friction-coefficient sets on a car-test campaign: the one place that
-turns parameter rows into predicted *measured* torque (measurement mechanisms applied) and
-RMSE. Everything here is a pure function of its arguments (Dask chunks call ``chunk_rmse``).
+"""Batch evaluation of friction-coefficient sets on a car-test campaign: parameter rows ->
+predicted *measured* torque (through ``clutch_model.prediction.predict_campaign``) -> RMSE.
+Everything here is a pure function of its arguments (Dask chunks call ``chunk_rmse``).
 """
 from __future__ import annotations
 
@@ -8,12 +8,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from clutch_model.plant import params as P
 from clutch_model.errors import DataError
-from clutch_model.plant.mechanisms import apply_measurement
-from clutch_model.plant.params import ClutchModel
 from clutch_model.formats.bag_reader import Campaign
-from clutch_model.plant.simulate import simulate_batch
+from clutch_model.plant import layout as P
+from clutch_model.plant.params import ClutchModel
+from clutch_model.prediction import PlantInputs, predict_campaign
 
 A_SLICE = slice(P.FRICTION_A, P.FRICTION_A + P.N_FRICTION_COEFFS)
 
@@ -27,19 +26,14 @@ def as_campaign(runs_or_campaign) -> Campaign:
     return Campaign(runs)
 
 
-@dataclass
-class CampaignInputs:
+@dataclass(frozen=True, kw_only=True)
+class CampaignInputs(PlantInputs):
     """The simulator inputs of a campaign plus what RMSE needs (picklable, no model)."""
 
-    t: np.ndarray
-    force: np.ndarray
-    slip: np.ndarray
-    sump: np.ndarray
-    run_start: np.ndarray
     torque_measured: np.ndarray
     mask: np.ndarray                 # rows with a finite measured torque that count
-    measurement: list                # measurement mechanisms (torque_offset, transport_delay)
-    names: list
+    measurement: list = None         # measurement mechanisms (torque_offset, transport_delay, ...)
+    names: list = None
 
     @classmethod
     def from_campaign(cls, campaign, model: ClutchModel | None = None, rows=None) -> "CampaignInputs":
@@ -50,15 +44,10 @@ class CampaignInputs:
             mask &= np.asarray(rows, bool)
         if not mask.any():
             raise DataError("no measured torque in the runs (/clutch/measured_torque)")
-        mech = [m.copy() for m in (model.mechanisms if model is not None else []) if m.kind == "measurement"]
-        return cls(t=np.ascontiguousarray(campaign.t, float), force=np.ascontiguousarray(campaign.force, float),
-                   slip=np.ascontiguousarray(campaign.slip, float), sump=np.ascontiguousarray(campaign.sump, float),
-                   run_start=np.ascontiguousarray(campaign.run_start, bool), torque_measured=meas, mask=mask,
-                   measurement=mech, names=list(campaign.names))
-
-    @property
-    def n_rows(self) -> int:
-        return int(self.t.size)
+        mech = [m.copy() for m in (model.mechanisms if model is not None else []) if m.path == "measurement"]
+        plant = PlantInputs.of(campaign)
+        return cls(**plant.__dict__, torque_measured=meas, mask=mask, measurement=mech,
+                   names=list(campaign.names))
 
     @property
     def simulated_seconds(self) -> float:
@@ -69,13 +58,9 @@ class CampaignInputs:
 
 
 def predict(pmat, inputs: CampaignInputs) -> np.ndarray:
-    """Predicted measured torque (S, N) for parameter rows ``pmat`` (S, 48)."""
-    res = simulate_batch(np.atleast_2d(pmat), inputs.t, inputs.force, inputs.slip, inputs.sump,
-                         run_start=inputs.run_start)
-    tq = res.torque_nm
-    if inputs.measurement:
-        tq = apply_measurement(inputs.measurement, inputs.t, tq, inputs.run_start)
-    return tq
+    """Predicted measured torque (S, N) for parameter rows ``pmat`` (S, 48); the campaign's
+    energy starts at 0."""
+    return predict_campaign(np.atleast_2d(pmat), inputs, energy0_j=0.0, measurement=inputs.measurement).torque_nm
 
 
 def rmse_rows(pred: np.ndarray, inputs: CampaignInputs) -> np.ndarray:

@@ -30,6 +30,7 @@ import numpy as np
 from clutch_model.errors import DataError, FitError
 from clutch_model.plant.params import ClutchModel, load_model, save_model
 from clutch_model.identification import box
+from clutch_model.plant.friction import monomials, stribeck
 
 P_SCALE, THETA_SCALE = box.P_BOX[1], box.THETA_BOX[1]
 BLOCK_SCALE = np.array([1.0, P_SCALE, P_SCALE ** 2, THETA_SCALE, THETA_SCALE ** 2])
@@ -38,47 +39,6 @@ STRICT_EPS = 1e-6                             # margin of the strict inequalitie
 I_BOUNDS = (1e-3, 20.0)
 IDX_MU_C, IDX_MU_S, IDX_W_S, IDX_K_V = (list(range(0, 5)), list(range(5, 10)),
                                         list(range(10, 15)), list(range(15, 20)))
-
-
-# --- the Stribeck model on bench rows ------------------------------------------------------------
-def monomials(pressure_mpa, theta_c):
-    """[1, P, P^2, theta, theta^2] with P and theta clamped to the box like the kernel."""
-    pr = np.clip(np.asarray(pressure_mpa, float), *box.P_BOX)
-    th = np.clip(np.asarray(theta_c, float), *box.THETA_BOX)
-    return np.stack([np.ones_like(pr), pr, pr * pr, th, th * th], axis=-1)
-
-
-def stribeck(a, i, w_abs, pressure_mpa, theta_c, jac: bool = False, floor: bool = True):
-    """mu_f of eq. 4.9 (constant i; floored at 0 like the kernel unless ``floor=False``) and
-    optionally its Jacobian with respect to (a0..a19, i): (mu, J (m, 21))."""
-    a = np.asarray(a, float)
-    w = np.abs(np.asarray(w_abs, float))
-    M = monomials(pressure_mpa, theta_c)
-    mu_c, mu_s, w_s_raw, k_v = (M @ a[0:5], M @ a[5:10], M @ a[10:15], M @ a[15:20])
-    floored = w_s_raw < 1e-6
-    w_s = np.where(floored, 1e-6, w_s_raw)
-    r = w / w_s
-    big = r >= 1e6
-    with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
-        ri = np.where(big, np.inf, np.power(np.where(big, 1.0, r), i))
-        e = np.where(big, 0.0, np.exp(-ri))
-    mu = mu_c + (mu_s - mu_c) * e + k_v * w
-    neg = mu < 0.0
-    if floor:
-        mu = np.where(neg, 0.0, mu)
-    if not jac:
-        return mu
-    with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
-        d_ws = np.where(floored | big, 0.0, (mu_s - mu_c) * e * i * ri / w_s)
-        lnr = np.where(r > 0, np.log(np.where(r > 0, r, 1.0)), 0.0)
-        d_i = np.where(big, 0.0, -(mu_s - mu_c) * e * ri * lnr)
-    d_ws = np.nan_to_num(d_ws)
-    d_i = np.nan_to_num(d_i)
-    J = np.concatenate([M * (1.0 - e)[:, None], M * e[:, None], M * d_ws[:, None],
-                        M * w[:, None], d_i[:, None]], axis=1)
-    if floor:
-        J[neg] = 0.0
-    return mu, J
 
 
 # --- data -------------------------------------------------------------------------------------------

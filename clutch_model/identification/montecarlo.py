@@ -48,7 +48,7 @@ def chunk_indices(accepted: np.ndarray, chunk_size: int) -> list:
     return [idx[k:k + chunk_size] for k in range(0, idx.size, chunk_size)]
 
 
-@dataclass
+@dataclass(frozen=True)
 class MonteCarloResult:
     samples: np.ndarray
     rmse: np.ndarray                # nan where rejected
@@ -299,6 +299,6 @@ def run_montecarlo(model: ClutchModel, runs_or_campaign, n_samples: int, spread:
                            mean_better=mean_better, rmse_mean=rmse_mean, refined_a=refined,
                            rmse_refined=float(rmse_ref), halving=hres, chunk_size=int(chunk_size), scheduler=label,
                            elapsed_s=elapsed, startup_s=startup,
-                           simulated_seconds_per_sample=inputs.simulated_seconds, notes=notes)
-    res.refined_model = model.with_friction(a=refined)
+                           simulated_seconds_per_sample=inputs.simulated_seconds, notes=notes,
+                           refined_model=model.with_friction(a=refined))
     return res

@@ -149,7 +149,7 @@ def identifiability_figure(screen, outdir) -> Path:
 def friction_fit_figure(fit, bench, path) -> Path:
     """Figures 6.7-6.9 style: fitted mu_f vs slip at a few pressures for the bench's sump
     temperatures, with the bench points."""
-    from clutch_model.identification.friction_fit import stribeck
+    from clutch_model.plant.friction import stribeck
 
     plt = _plt()
     th_levels = np.unique(np.round(np.asarray(bench.plate_temperature_c) / 40.0) * 40.0)[:4]

@@ -4,9 +4,15 @@ single-trajectory simulator (replay) and the batch simulator (Monte Carlo).
 
 State vector (float64[N_STATE]):
   0 film_thickness h [m]        1 pack_temperature [C]
-  2 hysteresis force [N]        3 pack force (lag state) [N]
+  2 hysteresis output [N]       3 pack force [N]
   4 energy E = int |w T| dt [J] 5 sign of the last slip above the lock tolerance
   6 heat power |w T| at the last output [W]
+  7 actuator force (lag state) [N]  8 measured-force target of the lag [N]
+
+Force chain (the pack_force path, mechanisms in catalog order): measured force (negative -> 0)
+-> actuator_lag (first order) -> actuator_hysteresis (play operator) -> spring_preload
+(minus the preload, >= 0) = pack force. Inside a step the lagged force moves monotonically,
+so the play operator is exact along it.
 
 Film integration: exponential (Rosenbrock-)Euler steps on h with the analytic Jacobian,
 sub-stepped so that h changes by at most MAX_REL_DH per sub-step. It is exact for the
@@ -22,10 +28,12 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from clutch_model.plant import params as P
+from clutch_model.plant import friction
+from clutch_model.plant import layout as P
+from clutch_model.plant.friction import P_MAX_MPA, THETA_MAX_C
 
-N_STATE = 7
-S_H, S_THETA, S_FHYST, S_FPACK, S_ENERGY, S_SIGN, S_POWER = range(7)
+N_STATE = 9
+S_H, S_THETA, S_FHYST, S_FPACK, S_ENERGY, S_SIGN, S_POWER, S_FLAG, S_FTARGET = range(9)
 
 # output record
 N_OUT = 16
@@ -42,7 +50,6 @@ MAX_STEP_S = 0.0051       # longer steps are split (inputs held): 200 Hz rows ar
 MAX_SUBSTEPS = 400
 INV_SQRT_2PI = 1.0 / math.sqrt(2.0 * math.pi)
 SQRT2 = math.sqrt(2.0)
-P_MAX_MPA, THETA_MAX_C = 20.0, 230.0
 SLIP_LIMIT = 1.0e4        # |slip| clamp inside the model (the node rejects > 1000)
 SUMP_MIN, SUMP_MAX = -100.0, 500.0
 H_MAX = 1.0e-2            # film cap [m]: far beyond any open-clutch gap
@@ -86,21 +93,9 @@ def viscosity(theta, p):
 
 @njit(cache=True)
 def friction_coefficient(w_abs, pressure_mpa, theta, p):
-    """Stribeck mu_f(w, P, theta), eq. 4.9-4.14 with constant i (table 6.3 order)."""
-    pr = min(max(pressure_mpa, 0.0), P_MAX_MPA)
-    th = min(max(theta, 0.0), THETA_MAX_C)
-    a = P.FRICTION_A
-    pr2, th2 = pr * pr, th * th
-    mu_c = p[a] + p[a + 1] * pr + p[a + 2] * pr2 + p[a + 3] * th + p[a + 4] * th2
-    mu_s = p[a + 5] + p[a + 6] * pr + p[a + 7] * pr2 + p[a + 8] * th + p[a + 9] * th2
-    w_s = p[a + 10] + p[a + 11] * pr + p[a + 12] * pr2 + p[a + 13] * th + p[a + 14] * th2
-    k_v = p[a + 15] + p[a + 16] * pr + p[a + 17] * pr2 + p[a + 18] * th + p[a + 19] * th2
-    if w_s < 1e-6:
-        w_s = 1e-6
-    r = w_abs / w_s
-    e = math.exp(-(r ** p[P.FRICTION_I])) if r < 1e6 else 0.0
-    mu = mu_c + (mu_s - mu_c) * e + k_v * w_abs
-    return mu if mu > 0.0 else 0.0
+    """Stribeck mu_f(w, P, theta) of the parameter vector (clutch_model.plant.friction)."""
+    return friction.mu(p[P.FRICTION_A:P.FRICTION_A + P.N_FRICTION_COEFFS], p[P.FRICTION_I],
+                       w_abs, pressure_mpa, theta)
 
 
 @njit(cache=True)
@@ -141,9 +136,29 @@ def film_rate(h, f_pack, mu, p, d):
 
 
 @njit(cache=True)
-def film_step(h, f_start, f_target, tau, dt, mu, p, d):
-    """Advance the film over dt. Pack force: f_target if tau <= 0, else the first-order lag
-    from f_start towards f_target (exact), sampled at each sub-step's midpoint."""
+def force_chain(f_actuator, f_hyst_prev, p):
+    """Hysteresis then preload on the actuator force: (hysteresis output, pack force)."""
+    r = p[P.HYST_RATIO]
+    fh = f_actuator
+    if r > 0.0:
+        lo, hi = f_actuator * (1.0 - r), f_actuator * (1.0 + r)
+        fh = f_hyst_prev
+        if fh < lo:
+            fh = lo
+        elif fh > hi:
+            fh = hi
+    pre = p[P.PRELOAD_N]
+    f = fh
+    if pre > 0.0:
+        f = fh - pre if fh > pre else 0.0
+    return fh, f
+
+
+@njit(cache=True)
+def film_step(h, f_start, f_target, tau, dt, mu, p, d, f_hyst):
+    """Advance the film over dt. Actuator force: f_target if tau <= 0, else the first-order
+    lag from f_start towards f_target (exact), sampled at each sub-step's midpoint and passed
+    through the force chain (hysteresis from ``f_hyst``, preload)."""
     remaining = dt
     elapsed = 0.0
     n = 0
@@ -152,9 +167,10 @@ def film_step(h, f_start, f_target, tau, dt, mu, p, d):
         s = remaining
         for _ in range(8):
             if tau > 0.0:
-                fm = f_target + (f_start - f_target) * math.exp(-(elapsed + 0.5 * s) / tau)
+                fa = f_target + (f_start - f_target) * math.exp(-(elapsed + 0.5 * s) / tau)
             else:
-                fm = f_target
+                fa = f_target
+            fm = force_chain(fa, f_hyst, p)[1]
             if fm > d[D_FMAX]:
                 fm = d[D_FMAX]
             rate, jac = film_rate(h, fm, mu, p, d)
@@ -182,45 +198,41 @@ def film_step(h, f_start, f_target, tau, dt, mu, p, d):
 
 
 @njit(cache=True)
-def pack_force_target(state, applied_force, p):
-    """Process one measured-force sample through the force chain:
-    negative -> 0, spring preload, hysteresis (play operator). Updates the hysteresis state;
-    without a lag, the pack force follows at once."""
+def _clamped_force(applied_force):
     f = applied_force if applied_force > 0.0 else 0.0
     if not (f < 1e12):
         f = 1e12
-    pre = p[P.PRELOAD_N]
-    if pre > 0.0:
-        f = f - pre if f > pre else 0.0
-    r = p[P.HYST_RATIO]
-    if r > 0.0:
-        lo, hi = f * (1.0 - r), f * (1.0 + r)
-        fh = state[S_FHYST]
-        if fh < lo:
-            fh = lo
-        elif fh > hi:
-            fh = hi
-        f = fh
-    state[S_FHYST] = f
-    if p[P.LAG_TAU_S] <= 0.0:
-        state[S_FPACK] = f
     return f
+
+
+@njit(cache=True)
+def pack_force_target(state, applied_force, p):
+    """Take one measured-force sample: it becomes the lag's target; without a lag the
+    actuator force, hysteresis and pack force follow at once. Returns the pack force."""
+    f = _clamped_force(applied_force)
+    state[S_FTARGET] = f
+    if p[P.LAG_TAU_S] <= 0.0:
+        state[S_FLAG] = f
+        fh, fp = force_chain(f, state[S_FHYST], p)
+        state[S_FHYST] = fh
+        state[S_FPACK] = fp
+    return state[S_FPACK]
 
 
 @njit(cache=True)
 def init_state(state, applied_force, sump_temperature, p):
     state[S_H] = p[P.H0]
     state[S_THETA] = min(max(sump_temperature, SUMP_MIN), SUMP_MAX)
-    state[S_FHYST] = 0.0
     state[S_ENERGY] = state[S_ENERGY]  # energy is carried (campaign), not reset here
     state[S_SIGN] = 1.0
     state[S_POWER] = 0.0
-    f = applied_force if applied_force > 0.0 else 0.0
-    pre = p[P.PRELOAD_N]
-    if pre > 0.0:
-        f = f - pre if f > pre else 0.0
-    state[S_FHYST] = min(f, 1e12)
-    state[S_FPACK] = state[S_FHYST]
+    # actuator at rest at the first sample, hysteresis centred on it
+    f = _clamped_force(applied_force)
+    state[S_FLAG] = f
+    state[S_FTARGET] = f
+    fh, fp = force_chain(f, f, p)
+    state[S_FHYST] = fh
+    state[S_FPACK] = fp
 
 
 @njit(cache=True)
@@ -305,11 +317,15 @@ def _advance_once(state, slip, sump_temperature, dt, p, d, scratch):
     theta0 = state[S_THETA]
     mu = viscosity(theta0, p)
     tau = p[P.LAG_TAU_S]
-    f_start = state[S_FPACK]
-    f_target = state[S_FHYST]
-    state[S_H] = film_step(state[S_H], f_start, f_target, tau, dt, mu, p, d)
+    f_start = state[S_FLAG]
+    f_target = state[S_FTARGET]
+    state[S_H] = film_step(state[S_H], f_start, f_target, tau, dt, mu, p, d, state[S_FHYST])
     if tau > 0.0:
-        state[S_FPACK] = f_target + (f_start - f_target) * math.exp(-dt / tau)
+        fa = f_target + (f_start - f_target) * math.exp(-dt / tau)
+        state[S_FLAG] = fa
+        fh, fp = force_chain(fa, state[S_FHYST], p)
+        state[S_FHYST] = fh
+        state[S_FPACK] = fp
     p_start = state[S_POWER]
     outputs(state, slip, sump_temperature, p, d, scratch)  # end-of-step power, inputs held
     p_end = scratch[O_POWER]
@@ -377,12 +393,3 @@ def run_batch(pmat, t, force, slip, sump, run_start, energy0):
             torque[j, k] = _row(k, state, p, d, t, force, slip, sump, run_start, scratch, out)
             theta[j, k] = out[O_THETA]
     return torque, theta
-
-
-@njit(cache=True)
-def friction_grid(p, w_abs, pressure_mpa, theta):
-    """mu_f on arrays (same shape), for fitting and positivity checks."""
-    out = np.empty(w_abs.size)
-    for k in range(w_abs.size):
-        out[k] = friction_coefficient(w_abs[k], pressure_mpa[k], theta[k], p)
-    return out

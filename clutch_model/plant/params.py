@@ -16,24 +16,10 @@ import numpy as np
 import yaml
 
 from clutch_model.errors import ParamsError
+from clutch_model.plant.layout import *  # noqa: F401,F403  (kernel vector layout)
+from clutch_model.plant.mechanisms import mechanism_from_dict, ordered
 
 REFERENCE_CLUTCH = Path(__file__).resolve().parents[2] / "config" / "reference_clutch.yaml"
-
-# --- layout of the kernel parameter vector -------------------------------------------
-R_OUTER, R_INNER, N_FRICTION, N_SEPARATOR, A_RED = 0, 1, 2, 3, 4
-SIGMA, YOUNGS, ASP_DENSITY, ASP_RADIUS, K_PERM, LINING_D, BJ_CHI = 5, 6, 7, 8, 9, 10, 11
-ALPHA0, ALPHA1 = 12, 13
-PLATE_HEAT_CAPACITY, B1, B2, B3, B4, HTF_MIN = 14, 15, 16, 17, 18, 19
-FRICTION_I = 20
-FRICTION_A = 21  # a0..a19 at 21..40
-H0 = 41
-LOCK_SLIP = 42
-# plant mechanisms (0 = off)
-LAG_TAU_S, HYST_RATIO, PRELOAD_N, ENERGY_SCALE_J, DRAG_COEFF = 43, 44, 45, 46, 47
-N_PARAMS = 48
-
-N_FRICTION_COEFFS = 20
-DEFAULT_LOCK_SLIP_RAD_S = 1e-3
 
 _REQUIRED = {
     "geometry": ["r_outer", "r_inner", "friction_surfaces", "separator_plates", "non_grooved_fraction"],
@@ -57,8 +43,6 @@ class ClutchModel:
     # -- construction ------------------------------------------------------------------
     @classmethod
     def from_dict(cls, raw: dict, source: str = "<memory>") -> "ClutchModel":
-        from clutch_model.plant.mechanisms import mechanism_from_dict
-
         if not isinstance(raw, dict):
             raise ParamsError(f"{source}: not a mapping of parameter sections")
         data = copy.deepcopy({k: v for k, v in raw.items() if k != "mechanisms"})
@@ -162,7 +146,7 @@ class ClutchModel:
         p[FRICTION_A:FRICTION_A + N_FRICTION_COEFFS] = np.asarray(fr["a"], dtype=float)
         p[H0] = d["initial"]["film_thickness"]
         p[LOCK_SLIP] = d.get("lock_slip_rad_s", DEFAULT_LOCK_SLIP_RAD_S)
-        for m in self.mechanisms:
+        for m in ordered(self.mechanisms):
             m.apply_to_vector(p)
         return p
 

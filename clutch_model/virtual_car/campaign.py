@@ -38,7 +38,7 @@ std ``torque_drift_nm``, time constant ``torque_drift_tau_s``).
 
 True friction: RC-1's (or the base model's) a0..a19 each multiplied by (1 + U(−s, s)),
 s = ``friction_spread`` (the thesis' Monte Carlo interval convention), redrawn (seeded) until
-μ_f > 0.01 on the grid P ∈ [0, 6] MPa, θ ∈ [0, 230] °C, ω ∈ [0, 30] rad/s. The exponent i
+μ_f ≥ 0.01 (certified, clutch_model.plant.friction) over P ∈ [0, 6] MPa, θ ∈ [0, 230] °C, ω ∈ [0, 30] rad/s. The exponent i
 is not perturbed.
 
 Bench (SAE#2 μPVT, thesis §5.1 "verification dataset"): for each sump temperature
@@ -63,6 +63,10 @@ sensor torque against the no-mechanism twin at the default magnitude (seeds 1-3)
 | torque_offset | offset_nm [N·m] | 10-50 | 25 | 25 N·m | constant shift, plain during releases |
 | transport_delay | delay_s [s] | 0.02-0.2 | 0.08 | 110-135 N·m | torque edges late vs force edges |
 | drag_torque | coeff_nm_per_rad_s | 2-10 | 6 | 25-32 N·m | + coeff·ω·ν(θ)/ν(60 °C) always; plainest at release force, cold |
+| torque_sensor_lag | tau_s [s] | 0.02-0.2 | 0.06 | 76-87 N·m (seeds 1-2) | torque edges rounded (first-order) vs force edges |
+
+The visible ranges and defaults live on the mechanism objects (``Mechanism.virtual_car``);
+the table restates them with the effect they have.
 
 (A physically typical open-pack drag is < 1 N·m/(rad/s), which would hide in the 8 N·m
 noise — the range above is what a diagnosis can be expected to see.)
@@ -94,41 +98,19 @@ from numba import njit
 
 from clutch_model.plant import kernels as K
 from clutch_model.plant import params as P
+from clutch_model.plant.friction import friction_grid, friction_positive
 from clutch_model.formats.bag_writer import DEFAULT_START_TIME_NS, RunSignals, TopicSeries
 from clutch_model.formats.bench_csv import BenchData
 from clutch_model.errors import DataError, ParamsError
 from clutch_model.plant.mechanisms import CATALOG, make_mechanism
 from clutch_model.plant.params import ClutchModel, load_model
 
-MECHANISM_PARAMETER = {
-    "actuator_lag": "tau_s",
-    "actuator_hysteresis": "ratio",
-    "spring_preload": "preload_n",
-    "friction_degradation": "energy_scale_j",
-    "torque_offset": "offset_nm",
-    "transport_delay": "delay_s",
-    "drag_torque": "coeff_nm_per_rad_s",
-}
-DEFAULT_MAGNITUDE = {
-    "actuator_lag": 0.15,
-    "actuator_hysteresis": 0.12,
-    "spring_preload": 800.0,
-    "friction_degradation": None,   # -> 12 % drop of mu over the campaign
-    "torque_offset": 25.0,
-    "transport_delay": 0.08,
-    "drag_torque": 6.0,
-}
-VISIBLE_RANGE = {
-    "actuator_lag": (0.05, 0.3),
-    "actuator_hysteresis": (0.05, 0.2),
-    "spring_preload": (300.0, 1500.0),
-    "friction_degradation": None,
-    "torque_offset": (10.0, 50.0),
-    "transport_delay": (0.02, 0.2),
-    "drag_torque": (2.0, 10.0),
-    "torque_ripple": (0.03, 0.15),
-    "pressure_temperature_cross": (1e-3, 4e-3),
-}
+# what the car draws for each catalog mechanism comes from the mechanism objects
+MECHANISM_PARAMETER = {mid: cls.magnitude_parameter() for mid, cls in CATALOG.items()}
+DEFAULT_MAGNITUDE = {mid: cls.virtual_car.default for mid, cls in CATALOG.items()}
+VISIBLE_RANGE = {**{mid: cls.virtual_car.visible for mid, cls in CATALOG.items()},
+                 "torque_ripple": (0.03, 0.15),
+                 "pressure_temperature_cross": (1e-3, 4e-3)}
 EXTRA_EFFECTS = {
     "torque_ripple": "sensor torque x (1 + A sin(k phi + phi0)), phi = slip angle (int w dt) "
                      "per run: once-per-revolution runout / plate-parallelism ripple",
@@ -229,7 +211,7 @@ class CampaignSpec:
         return "none"
 
 
-@dataclass
+@dataclass(frozen=True)
 class SynthRun:
     """One synthetic run: truth on the plant grid plus the measured channels."""
 
@@ -251,7 +233,7 @@ class SynthRun:
         return self.signals.measured_torque.values
 
 
-@dataclass
+@dataclass(frozen=True)
 class CampaignResult:
     spec: CampaignSpec
     runs: list
@@ -269,22 +251,10 @@ class CampaignResult:
 
 # ----------------------------------------------------------------------------- truth
 def friction_is_positive(model: ClutchModel, minimum: float = MU_POSITIVE_MIN) -> bool:
-    """μ_f > minimum over FRICTION_CHECK_BOX (a 13 x 24 x 31 grid incl. the corners)."""
-    w = np.concatenate([[0.0, 1e-3, 0.005, 0.01, 0.02, 0.05], np.linspace(0.1, 30.0, 25)])
-    pr = np.linspace(*FRICTION_CHECK_BOX["pressure_mpa"], 13)
-    th = np.linspace(*FRICTION_CHECK_BOX["theta_c"], 24)
-    W, PP, TH = np.meshgrid(w, pr, th, indexing="ij")
-    # friction_grid floors at 0, so evaluate the raw Stribeck law here
-    mu = _raw_friction(model.vector(), W.ravel(), PP.ravel(), TH.ravel())
-    return bool(np.all(mu > minimum))
-
-
-def _raw_friction(p, w, pr, th):
-    a = p[P.FRICTION_A:P.FRICTION_A + 20]
-    pr2, th2 = pr * pr, th * th
-    poly = lambda j: a[j] + a[j + 1] * pr + a[j + 2] * pr2 + a[j + 3] * th + a[j + 4] * th2  # noqa: E731
-    mu_c, mu_s, w_s, k_v = poly(0), poly(5), np.maximum(poly(10), 1e-6), poly(15)
-    return mu_c + (mu_s - mu_c) * np.exp(-(w / w_s) ** p[P.FRICTION_I]) + k_v * w
+    """μ_f >= minimum over FRICTION_CHECK_BOX (the one friction positivity check)."""
+    return friction_positive(model.friction_coefficients, model.friction_exponent,
+                             FRICTION_CHECK_BOX["pressure_mpa"], FRICTION_CHECK_BOX["theta_c"],
+                             FRICTION_CHECK_BOX["slip_rad_s"], minimum=minimum)
 
 
 def perturb_friction(model: ClutchModel, spread: float, rng, max_tries: int = 1000):
@@ -438,7 +408,7 @@ def synthesize_bench(true_model: ClutchModel, spec: CampaignSpec, rng) -> BenchD
     arr = np.asarray(rows, dtype=float)
     w, pr, sump = arr[:, 0], arr[:, 1], arr[:, 2]
     plate = sump + 1.0 + 0.15 * pr * np.abs(w) + rng.normal(0.0, spec.bench_plate_noise_c, w.size)
-    mu = K.friction_grid(true_model.vector(), np.abs(w), pr, plate)
+    mu = friction_grid(true_model.friction_coefficients, true_model.friction_exponent, np.abs(w), pr, plate)
     mu = mu + rng.normal(0.0, spec.bench_noise, w.size)
     # logged resolution of the bench: 1e-4 rad/s, 1 kPa, 0.01 C, 1e-4
     return BenchData(slip_speed_rad_s=np.round(w, 4), pressure_mpa=np.round(pr, 3),
@@ -447,9 +417,200 @@ def synthesize_bench(true_model: ClutchModel, spec: CampaignSpec, rng) -> BenchD
 
 
 # --------------------------------------------------------------------------- campaign
-def _true_model(spec: CampaignSpec, base: ClutchModel, rng):
+@dataclass(frozen=True)
+class Truth:
+    """Stage 1: the true clutch (perturbed friction) and its relative friction factors."""
+    model: ClutchModel
+    friction_factors: np.ndarray
+
+
+@dataclass(frozen=True)
+class Schedule:
+    """Stage 2: the test schedule, on each run's grid and concatenated in log-time order."""
+    t_run: np.ndarray                # plant grid of a run, s from its start
+    t_temp: np.ndarray               # temperature grid of a run
+    start_ns: tuple                  # log time of each run's start
+    force: tuple                     # true actuator force per run
+    slip: tuple                      # true slip per run
+    sump: tuple                      # true sump per run (plant grid)
+    runs: tuple                      # schedule facts per run (dicts, not mutated)
+    t_abs: np.ndarray                # concatenated grid, s from the campaign start
+    run_start: np.ndarray
+
+    @property
+    def n_runs(self) -> int:
+        return len(self.start_ns)
+
+    @property
+    def n_rows(self) -> int:
+        return int(self.t_run.size)
+
+
+@dataclass(frozen=True)
+class HiddenMechanism:
+    """Stage 3: the true model with its hidden catalog mechanism (if any) and its value."""
+    model: ClutchModel
+    value: float | None
+
+
+@dataclass(frozen=True)
+class PlantTruth:
+    """Stage 4: the true plant on the whole campaign and what the noise-free sensor reads."""
+    torque: np.ndarray
+    pack: np.ndarray
+    power: np.ndarray
+    mu: np.ndarray
+    sensor: np.ndarray
+    extra_magnitude: float | None
+
+
+def draw_truth(spec: CampaignSpec, base: ClutchModel, rng) -> Truth:
     model, factors = perturb_friction(base, spec.friction_spread, rng)
-    return model, factors
+    return Truth(model, factors)
+
+
+def plan_schedule(spec: CampaignSpec, base: ClutchModel, rng) -> Schedule:
+    """Runs of stratified sump and slip levels, torque requests and releases (module doc)."""
+    n = spec.n_runs
+    n_rows = int(round(spec.run_duration_s * spec.rate_hz))
+    t_run = np.arange(n_rows) / spec.rate_hz
+    n_temp = int(round(spec.run_duration_s * spec.temperature_rate_hz))
+    t_temp = np.arange(n_temp) / spec.temperature_rate_hz
+    sumps = _stratified(rng, n, *spec.sump_range_c)
+    slips = _stratified(rng, n, *spec.slip_range_rad_s, log=True)
+    k_t = _torque_per_newton(base)
+    offsets_s, sched, F, W, S = [], [], [], [], []
+    t_cur = 0.0
+    for i in range(n):
+        offsets_s.append(t_cur)
+        w_run, s_run = float(slips[i]), float(sumps[i])
+        slip, s_info = _slip_profile(rng, spec, t_run, w_run)
+        w_peak = float(np.max(np.abs(slip)))
+        f_hi = min(spec.force_range_n[1], spec.power_limit_w / (k_t * w_peak))
+        f_hi = max(f_hi, min(spec.force_range_n[1], spec.force_range_n[0] + 2000.0))
+        force, f_info = _force_profile(rng, spec, t_run, f_hi)
+        warm = float(rng.uniform(0.0, 0.08))
+        sump = s_run + warm * t_run
+        sched.append({"sump_level_c": round(s_run, 3), "sump_warmup_c_per_s": round(warm, 4),
+                      **s_info, **f_info})
+        F.append(force); W.append(slip); S.append(sump)
+        t_cur += spec.run_duration_s + spec.gap_s + float(rng.uniform(0, spec.gap_jitter_s))
+    # log times in whole ms from the campaign start
+    start_ns = [int(spec.start_time_ns) + int(round(o * 1e3)) * 1_000_000 for o in offsets_s]
+    t_abs = np.concatenate([(sn - spec.start_time_ns) * 1e-9 + t_run for sn in start_ns])
+    run_start = np.zeros(t_abs.size, dtype=bool)
+    run_start[np.arange(n) * n_rows] = True
+    return Schedule(t_run=t_run, t_temp=t_temp, start_ns=tuple(start_ns), force=tuple(F), slip=tuple(W),
+                    sump=tuple(S), runs=tuple(sched), t_abs=t_abs, run_start=run_start)
+
+
+def hide_mechanism(spec: CampaignSpec, model: ClutchModel, schedule: Schedule) -> HiddenMechanism:
+    """Add the spec's catalog mechanism at its magnitude (default: the mechanism's own
+    virtual-car default; friction_degradation: a fixed drop of mu over the campaign)."""
+    if not spec.mechanism:
+        return HiddenMechanism(model, None)
+    value = spec.magnitude if spec.magnitude is not None else DEFAULT_MAGNITUDE[spec.mechanism]
+    if spec.mechanism == "friction_degradation" and value is None:
+        pre = _simulate_truth(model, *_plant_inputs(schedule), spec, None)
+        e_tot = float(np.sum(_per_run_energy(schedule.t_abs, pre["power"], schedule.run_start)))
+        value = e_tot / -math.log(1.0 - DEGRADATION_DEFAULT_DROP)
+    return HiddenMechanism(_with_mechanism(model, spec.mechanism, value), float(value))
+
+
+def simulate_plant(spec: CampaignSpec, model: ClutchModel, schedule: Schedule) -> PlantTruth:
+    """The true plant over the whole campaign (energy carried across runs) and the noise-free
+    sensor (the model's measurement mechanisms)."""
+    from clutch_model.plant.simulate import predict_measured_torque
+
+    extra = None
+    if spec.extra_effect:
+        extra = spec.magnitude if spec.magnitude is not None else DEFAULT_EXTRA_MAGNITUDE[spec.extra_effect]
+    sim = _simulate_truth(model, *_plant_inputs(schedule), spec, extra)
+    sensor = np.asarray(predict_measured_torque(model, schedule.t_abs, sim["torque"], schedule.run_start), float)
+    return PlantTruth(torque=sim["torque"], pack=sim["pack"], power=sim["power"], mu=sim["mu"], sensor=sensor,
+                      extra_magnitude=extra)
+
+
+def record_runs(spec: CampaignSpec, schedule: Schedule, plant: PlantTruth, rng) -> list:
+    """Per run: the extra effect on the sensor (if any), noise, the logged channels."""
+    runs = []
+    var_t = spec.temperature_noise_c ** 2
+    n_rows, t_run, t_temp = schedule.n_rows, schedule.t_run, schedule.t_temp
+    n_temp = t_temp.size
+    e_runs = _per_run_energy(schedule.t_abs, plant.power, schedule.run_start)
+    names = run_names(schedule.n_runs)
+    for i in range(schedule.n_runs):
+        info = dict(schedule.runs[i])
+        sl = slice(i * n_rows, (i + 1) * n_rows)
+        slip_i = schedule.slip[i]
+        sens = plant.sensor[sl].copy()
+        if spec.extra_effect == "torque_ripple":
+            phi = np.concatenate([[0.0], np.cumsum(0.5 * (slip_i[1:] + slip_i[:-1]) * np.diff(t_run))])
+            phi0 = float(rng.uniform(0, 2 * np.pi))
+            sens = sens * (1.0 + plant.extra_magnitude * np.sin(spec.ripple_order * phi + phi0))
+            info["ripple_phase_rad"] = round(phi0, 4)
+        peak = float(np.max(np.abs(plant.torque[sl])))
+        sigma = math.hypot(spec.torque_noise_nm, spec.torque_noise_rel * peak)
+        torque_meas = sens + rng.normal(0.0, 1.0, n_rows) * sigma
+        if spec.torque_drift_nm > 0:
+            torque_meas = torque_meas + _ou(rng, n_rows, 1.0 / spec.rate_hz,
+                                            spec.torque_drift_tau_s, spec.torque_drift_nm)
+        force_meas = schedule.force[i] + rng.normal(0.0, spec.force_noise_n, n_rows)
+        slip_meas = slip_i + rng.normal(0.0, spec.slip_noise_rad_s, n_rows)
+        sump_meas = np.interp(t_temp, t_run, schedule.sump[i]) + rng.normal(0.0, spec.temperature_noise_c, n_temp)
+        pack_series = None
+        if spec.include_pack_temperature:
+            pack_meas = (np.interp(t_temp, t_run, plant.pack[sl])
+                         + rng.normal(0.0, spec.temperature_noise_c, n_temp))
+            pack_series = TopicSeries(t_temp, pack_meas, var_t)
+        signals = RunSignals(applied_force=TopicSeries(t_run, force_meas),
+                             slip_speed=TopicSeries(t_run, slip_meas),
+                             sump_temperature=TopicSeries(t_temp, sump_meas, var_t),
+                             measured_torque=TopicSeries(t_run, torque_meas),
+                             pack_temperature=pack_series)
+        info.update({"torque_noise_sigma_nm": round(sigma, 4),
+                     "peak_torque_nm": round(peak, 2),
+                     "peak_pack_temperature_c": round(float(np.max(plant.pack[sl])), 2),
+                     "energy_j": round(float(e_runs[i]), 1)})
+        runs.append(SynthRun(name=names[i], start_time_ns=schedule.start_ns[i], t_s=t_run.copy(),
+                             applied_force_n=schedule.force[i], slip_speed_rad_s=slip_i,
+                             sump_temperature_c=schedule.sump[i],
+                             plant_torque_nm=plant.torque[sl].copy(), sensor_torque_nm=sens,
+                             pack_temperature_c=plant.pack[sl].copy(),
+                             friction_coefficient=plant.mu[sl].copy(), signals=signals, schedule=info))
+    return runs
+
+
+def campaign_metadata(spec: CampaignSpec, base: ClutchModel, truth: Truth, hidden: HiddenMechanism,
+                      plant: PlantTruth, runs: list, schedule: Schedule) -> dict:
+    e_total = float(np.sum(_per_run_energy(schedule.t_abs, plant.power, schedule.run_start)))
+    extra = plant.extra_magnitude
+    meta = {
+        "generator": "clutch_model.virtual_car.campaign",
+        "expected_cause": spec.expected_cause,
+        "seed": int(spec.seed),
+        "base_model": str(base.source),
+        "friction_spread": spec.friction_spread,
+        "friction_factors": [float(x) for x in truth.friction_factors],
+        "true_friction_a": [float(x) for x in hidden.model.friction_coefficients],
+        "mechanism": ({"id": spec.mechanism, MECHANISM_PARAMETER[spec.mechanism]: float(hidden.value)}
+                      if spec.mechanism else None),
+        "extra_effect": ({"name": spec.extra_effect, "magnitude": float(extra),
+                          "description": EXTRA_EFFECTS[spec.extra_effect],
+                          **({"order": spec.ripple_order} if spec.extra_effect == "torque_ripple" else {})}
+                         if spec.extra_effect else None),
+        "campaign_energy_j": e_total,
+        "runs": [{"name": r.name, "start_time_ns": r.start_time_ns, **r.schedule} for r in runs],
+        "spec": _jsonable(asdict(spec)),
+    }
+    if spec.mechanism == "friction_degradation":
+        meta["friction_factor_at_end"] = math.exp(-e_total / float(hidden.value))
+    return meta
+
+
+def _plant_inputs(schedule: Schedule):
+    return (schedule.t_abs, np.concatenate(schedule.force), np.concatenate(schedule.slip),
+            np.concatenate(schedule.sump), schedule.run_start)
 
 
 def _with_mechanism(model: ClutchModel, mech_id: str, value: float) -> ClutchModel:
@@ -460,135 +621,27 @@ def _with_mechanism(model: ClutchModel, mech_id: str, value: float) -> ClutchMod
 
 def synthesize_campaign(spec: CampaignSpec | None = None, base_model: ClutchModel | None = None,
                         progress=None) -> CampaignResult:
-    """Generate a campaign (see the module docstring). ``progress``: optional callable(str)."""
-    from clutch_model.plant.simulate import predict_measured_torque
-
+    """Generate a campaign (see the module docstring), in stages: truth -> schedule -> hidden
+    mechanism -> plant -> recorded runs -> bench -> metadata. ``progress``: optional
+    callable(str). Every stage draws from its own seeded stream."""
     spec = spec or CampaignSpec()
     spec.validate()
     base = base_model if base_model is not None else load_model(None)
     ss = np.random.SeedSequence(int(spec.seed))
     rng_fric, rng_sched, rng_noise, rng_bench = (np.random.default_rng(s) for s in ss.spawn(4))
 
-    true_model, factors = _true_model(spec, base, rng_fric)
-
-    # ---- schedule
-    n = spec.n_runs
-    n_rows = int(round(spec.run_duration_s * spec.rate_hz))
-    t_run = np.arange(n_rows) / spec.rate_hz
-    n_temp = int(round(spec.run_duration_s * spec.temperature_rate_hz))
-    t_temp = np.arange(n_temp) / spec.temperature_rate_hz
-    sumps = _stratified(rng_sched, n, *spec.sump_range_c)
-    slips = _stratified(rng_sched, n, *spec.slip_range_rad_s, log=True)
-    k_t = _torque_per_newton(base)
-    offsets_s, sched, F, W, S = [], [], [], [], []
-    t_cur = 0.0
-    for i in range(n):
-        offsets_s.append(t_cur)
-        w_run, s_run = float(slips[i]), float(sumps[i])
-        slip, s_info = _slip_profile(rng_sched, spec, t_run, w_run)
-        w_peak = float(np.max(np.abs(slip)))
-        f_hi = min(spec.force_range_n[1], spec.power_limit_w / (k_t * w_peak))
-        f_hi = max(f_hi, min(spec.force_range_n[1], spec.force_range_n[0] + 2000.0))
-        force, f_info = _force_profile(rng_sched, spec, t_run, f_hi)
-        warm = float(rng_sched.uniform(0.0, 0.08))
-        sump = s_run + warm * t_run
-        sched.append({"sump_level_c": round(s_run, 3), "sump_warmup_c_per_s": round(warm, 4),
-                      **s_info, **f_info})
-        F.append(force); W.append(slip); S.append(sump)
-        t_cur += spec.run_duration_s + spec.gap_s + float(rng_sched.uniform(0, spec.gap_jitter_s))
-    # log times in whole ms from the campaign start
-    start_ns = [int(spec.start_time_ns) + int(round(o * 1e3)) * 1_000_000 for o in offsets_s]
-    t_abs = np.concatenate([(sn - spec.start_time_ns) * 1e-9 + t_run for sn in start_ns])
-    run_start = np.zeros(t_abs.size, dtype=bool)
-    run_start[np.arange(n) * n_rows] = True
-    force_all, slip_all, sump_all = np.concatenate(F), np.concatenate(W), np.concatenate(S)
-
-    # ---- truth: mechanism magnitude
-    mech_value = None
-    extra_mag = None
-    if spec.mechanism:
-        mech_value = spec.magnitude if spec.magnitude is not None else DEFAULT_MAGNITUDE[spec.mechanism]
-        if spec.mechanism == "friction_degradation" and mech_value is None:
-            pre = _simulate_truth(true_model, t_abs, force_all, slip_all, sump_all, run_start, spec, None)
-            e_tot = float(np.sum(_per_run_energy(t_abs, pre["power"], run_start)))
-            mech_value = e_tot / -math.log(1.0 - DEGRADATION_DEFAULT_DROP)
-        true_model = _with_mechanism(true_model, spec.mechanism, mech_value)
-    if spec.extra_effect:
-        extra_mag = spec.magnitude if spec.magnitude is not None else DEFAULT_EXTRA_MAGNITUDE[spec.extra_effect]
+    truth = draw_truth(spec, base, rng_fric)
+    schedule = plan_schedule(spec, base, rng_sched)
+    hidden = hide_mechanism(spec, truth.model, schedule)
     if progress:
         progress("simulating the true plant")
-    sim = _simulate_truth(true_model, t_abs, force_all, slip_all, sump_all, run_start, spec, extra_mag)
-    sensor = np.asarray(predict_measured_torque(true_model, t_abs, sim["torque"], run_start), float)
-
-    # ---- per run: extra effect, noise, channels
-    runs = []
-    var_t = spec.temperature_noise_c ** 2
-    e_runs = _per_run_energy(t_abs, sim["power"], run_start)
-    for i in range(n):
-        sl = slice(i * n_rows, (i + 1) * n_rows)
-        slip_i = slip_all[sl]
-        sens = sensor[sl].copy()
-        if spec.extra_effect == "torque_ripple":
-            phi = np.concatenate([[0.0], np.cumsum(0.5 * (slip_i[1:] + slip_i[:-1]) * np.diff(t_run))])
-            phi0 = float(rng_noise.uniform(0, 2 * np.pi))
-            sens = sens * (1.0 + extra_mag * np.sin(spec.ripple_order * phi + phi0))
-            sched[i]["ripple_phase_rad"] = round(phi0, 4)
-        peak = float(np.max(np.abs(sim["torque"][sl])))
-        sigma = math.hypot(spec.torque_noise_nm, spec.torque_noise_rel * peak)
-        torque_meas = sens + rng_noise.normal(0.0, 1.0, n_rows) * sigma
-        if spec.torque_drift_nm > 0:
-            torque_meas = torque_meas + _ou(rng_noise, n_rows, 1.0 / spec.rate_hz,
-                                            spec.torque_drift_tau_s, spec.torque_drift_nm)
-        force_meas = F[i] + rng_noise.normal(0.0, spec.force_noise_n, n_rows)
-        slip_meas = slip_i + rng_noise.normal(0.0, spec.slip_noise_rad_s, n_rows)
-        sump_meas = np.interp(t_temp, t_run, S[i]) + rng_noise.normal(0.0, spec.temperature_noise_c, n_temp)
-        pack_series = None
-        if spec.include_pack_temperature:
-            pack_meas = (np.interp(t_temp, t_run, sim["pack"][sl])
-                         + rng_noise.normal(0.0, spec.temperature_noise_c, n_temp))
-            pack_series = TopicSeries(t_temp, pack_meas, var_t)
-        signals = RunSignals(applied_force=TopicSeries(t_run, force_meas),
-                             slip_speed=TopicSeries(t_run, slip_meas),
-                             sump_temperature=TopicSeries(t_temp, sump_meas, var_t),
-                             measured_torque=TopicSeries(t_run, torque_meas),
-                             pack_temperature=pack_series)
-        sched[i].update({"torque_noise_sigma_nm": round(sigma, 4),
-                         "peak_torque_nm": round(peak, 2),
-                         "peak_pack_temperature_c": round(float(np.max(sim["pack"][sl])), 2),
-                         "energy_j": round(float(e_runs[i]), 1)})
-        runs.append(SynthRun(name=run_names(n)[i], start_time_ns=start_ns[i], t_s=t_run.copy(),
-                             applied_force_n=F[i], slip_speed_rad_s=slip_i, sump_temperature_c=S[i],
-                             plant_torque_nm=sim["torque"][sl].copy(), sensor_torque_nm=sens,
-                             pack_temperature_c=sim["pack"][sl].copy(),
-                             friction_coefficient=sim["mu"][sl].copy(), signals=signals,
-                             schedule=sched[i]))
-
+    plant = simulate_plant(spec, hidden.model, schedule)
+    runs = record_runs(spec, schedule, plant, rng_noise)
     if progress:
         progress("bench table")
-    bench = synthesize_bench(true_model, spec, rng_bench)
-
-    e_total = float(np.sum(e_runs))
-    meta = {
-        "generator": "clutch_model.virtual_car.campaign",
-        "expected_cause": spec.expected_cause,
-        "seed": int(spec.seed),
-        "base_model": str(base.source),
-        "friction_spread": spec.friction_spread,
-        "friction_factors": [float(x) for x in factors],
-        "true_friction_a": [float(x) for x in true_model.friction_coefficients],
-        "mechanism": ({"id": spec.mechanism, MECHANISM_PARAMETER[spec.mechanism]: float(mech_value)}
-                      if spec.mechanism else None),
-        "extra_effect": ({"name": spec.extra_effect, "magnitude": float(extra_mag),
-                          "description": EXTRA_EFFECTS[spec.extra_effect],
-                          **({"order": spec.ripple_order} if spec.extra_effect == "torque_ripple" else {})}
-                         if spec.extra_effect else None),
-        "campaign_energy_j": e_total,
-        "runs": [{"name": r.name, "start_time_ns": r.start_time_ns, **r.schedule} for r in runs],
-        "spec": _jsonable(asdict(spec)),
-    }
-    if spec.mechanism == "friction_degradation":
-        meta["friction_factor_at_end"] = math.exp(-e_total / float(mech_value))
-    return CampaignResult(spec=spec, runs=runs, bench=bench, true_model=true_model, metadata=meta)
+    bench = synthesize_bench(hidden.model, spec, rng_bench)
+    meta = campaign_metadata(spec, base, truth, hidden, plant, runs, schedule)
+    return CampaignResult(spec=spec, runs=runs, bench=bench, true_model=hidden.model, metadata=meta)
 
 
 def _per_run_energy(t, power, run_start):

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from clutch_model.plant.kernels import friction_grid
+from clutch_model.plant.friction import friction_grid
 from clutch_model.plant.params import ClutchModel
 from clutch_model.formats.bag_reader import Campaign, Run
 from clutch_model.plant.simulate import predict_measured_torque, simulate
@@ -26,7 +26,7 @@ def synthetic_bench(model: ClutchModel, *, slips=BENCH_SLIPS, pressures=BENCH_PR
                            indexing="ij")
     W, S, Pm = W.ravel(), S.ravel(), Pm.ravel()
     plate = np.clip(S + 4.0 * Pm * np.sqrt(W) + rng.normal(0, 1.0, W.size), 0.0, 230.0)
-    mu = friction_grid(model.vector(), W, Pm, plate) + rng.normal(0.0, noise, W.size)
+    mu = friction_grid(model.friction_coefficients, model.friction_exponent, W, Pm, plate) + rng.normal(0.0, noise, W.size)
     return BenchData(slip_speed_rad_s=W, pressure_mpa=Pm, plate_temperature_c=plate,
                      sump_temperature_c=S, friction_coefficient=mu, source="synthetic")
 

@@ -11,9 +11,20 @@ metadata). Magnitudes: see clutch_model.virtual_car.campaign (module docstring).
 """
 from __future__ import annotations
 
-MECHANISM_IDS = ("actuator_lag", "actuator_hysteresis", "spring_preload", "friction_degradation",
-                 "torque_offset", "transport_delay", "drag_torque")
 EXTRA_EFFECTS = ("torque_ripple", "pressure_temperature_cross")
+
+
+def mechanism_ids() -> tuple:
+    """The catalog's ids (the mechanism objects are the one source)."""
+    from clutch_model.plant.mechanisms import CATALOG
+
+    return tuple(CATALOG)
+
+
+def magnitude_parameters() -> str:
+    from clutch_model.plant.mechanisms import CATALOG
+
+    return ", ".join(f"{cls.magnitude_parameter()} ({mid})" for mid, cls in CATALOG.items())
 
 
 def add_parser(subparsers) -> None:
@@ -30,14 +41,13 @@ def add_parser(subparsers) -> None:
     p.add_argument("--runs", type=int, default=12, metavar="N", help="number of test runs = bags (default 12)")
     p.add_argument("--duration", type=float, default=9.0, metavar="S", help="duration of a run, s (default 9)")
     g = p.add_mutually_exclusive_group()
-    g.add_argument("--mechanism", choices=MECHANISM_IDS, default=None,
+    g.add_argument("--mechanism", choices=mechanism_ids(), default=None,
                    help="hidden catalog mechanism in the true car")
     g.add_argument("--extra-effect", dest="extra_effect", choices=EXTRA_EFFECTS, default=None,
                    help="hidden effect outside the catalog (a diagnosis should say 'unexplained')")
     p.add_argument("--magnitude", type=float, default=None, metavar="X",
-                   help="the mechanism's parameter (tau_s, ratio, preload_n, energy_scale_j, "
-                        "offset_nm, delay_s, coeff_nm_per_rad_s) or the extra effect's amplitude; "
-                        "default: a typical visible value")
+                   help=f"the mechanism's parameter ({magnitude_parameters()}) or the extra "
+                        "effect's amplitude; default: a typical visible value")
     p.add_argument("--friction-spread", dest="friction_spread", type=float, default=0.05,
                    metavar="F", help="relative spread of the true friction coefficients around "
                                      "the base model's, uniform +-F (default 0.05)")

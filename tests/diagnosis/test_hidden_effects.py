@@ -7,19 +7,18 @@ CLUTCH_HIDDEN_SEED=<int> draws other magnitudes and campaigns (default: a fixed 
 reproducible). bench/bench_diagnose.py runs the same check over many seeds.
 """
 import json
-import math
 import os
 
 import numpy as np
 import pytest
 
-from clutch_model.virtual_car.campaign import VISIBLE_RANGE, CampaignSpec, synthesize_campaign, write_campaign
+from clutch_model.plant.mechanisms import DIAGNOSIS_CANDIDATES
+from clutch_model.virtual_car.campaign import EXTRA_EFFECTS, VISIBLE_RANGE, CampaignSpec, synthesize_campaign, write_campaign
 from clutch_sim.cli import main as cli
 
 HIDDEN_SEED = int(os.environ.get("CLUTCH_HIDDEN_SEED", "20261123"))
-MECHANISMS = ["actuator_lag", "actuator_hysteresis", "spring_preload", "friction_degradation",
-              "torque_offset", "transport_delay", "drag_torque"]
-EXTRA = ["torque_ripple", "pressure_temperature_cross"]
+MECHANISMS = list(DIAGNOSIS_CANDIDATES)     # every mechanism diagnose has as a candidate
+EXTRA = list(EXTRA_EFFECTS)
 
 
 def hidden_magnitude(name: str, k: int):
@@ -69,7 +68,7 @@ def test_says_none_without_mechanism(tmp_path):
     assert r["calibrated"] < r["nominal"]
 
 
-@pytest.mark.parametrize("k,effect", [(30, "torque_ripple"), (31, "pressure_temperature_cross")])
+@pytest.mark.parametrize("k,effect", [(30 + j, e) for j, e in enumerate(EXTRA)])
 def test_effect_outside_catalog_is_unexplained(tmp_path, k, effect):
     spec, rep = run_diagnose(tmp_path, k, extra_effect=effect, magnitude=hidden_magnitude(effect, k))
     assert rep["cause"]["id"] == "unexplained", rep["cause"]["evidence"]

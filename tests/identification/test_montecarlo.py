@@ -7,7 +7,7 @@ from clutch_model.identification.halving import interval_halving
 from clutch_model.identification.montecarlo import chunk_indices, draw_samples, run_montecarlo
 from clutch_model.plant.params import load_model
 
-from .conftest import NOISE_NM
+from .conftest import NOISE_NM, grid_friction_min
 
 
 def test_draw_samples_reproducible_and_bounded(rc1):
@@ -21,10 +21,15 @@ def test_draw_samples_reproducible_and_bounded(rc1):
 
 
 def test_interval_halving_finds_minimum():
-    f = lambda xs: (np.asarray(xs) - 0.37) ** 2  # noqa: E731
+    seen = []
+
+    def f(xs):
+        seen.extend(np.atleast_1d(xs).tolist())
+        return (np.asarray(xs) - 0.37) ** 2
+
     h = interval_halving(f, 0.0, 1.0, rel_tol=1e-4)
     assert h.x == pytest.approx(0.37, abs=1e-3)
-    assert h.evaluations == 1 + 2 * h.iterations
+    assert h.evaluations == len(seen)                # the count it reports is what it evaluated
 
 
 @pytest.fixture(scope="module")
@@ -35,7 +40,9 @@ def mc_serial(rc1, car_runs):
 def test_montecarlo_improves_held_out_rmse(rc1, car_runs, mc_serial):
     res = mc_serial
     assert res.accepted.sum() > 200
-    assert np.array_equal(res.accepted, box.friction_positive_many(res.samples, rc1.friction_exponent))
+    # accepted samples keep friction >= 0 on an independent dense grid of the car box
+    for a in res.samples[res.accepted][:25]:
+        assert grid_friction_min(a, rc1.friction_exponent) >= 0.0
     assert np.all(np.isnan(res.rmse[~res.accepted])) and np.all(np.isfinite(res.rmse[res.accepted]))
     assert res.better.sum() > 0 and res.rmse_refined < res.rmse_nominal
     inp = CampaignInputs.from_campaign(car_runs[1], rc1)

@@ -2,15 +2,15 @@ import numpy as np
 import pytest
 
 from clutch_model.identification import sensitivity as se
-from clutch_model.plant.kernels import friction_grid
+from clutch_model.plant.friction import friction_grid
 
 
 def test_scale_friction_scales_mu_exactly(rc1):
     a = rc1.friction_coefficients
     w, p, t = np.array([0.0, 0.01, 0.05, 1.0, 20.0]), np.full(5, 2.0), np.full(5, 80.0)
-    mu = friction_grid(rc1.vector(), w, p, t)
+    mu = friction_grid(rc1.friction_coefficients, rc1.friction_exponent, w, p, t)
     for f in (0.99, 1.01):
-        mu_s = friction_grid(rc1.with_friction(a=se.scale_friction(a, f)).vector(), w, p, t)
+        mu_s = friction_grid(se.scale_friction(a, f), rc1.friction_exponent, w, p, t)
         assert np.allclose(mu_s, f * mu, rtol=1e-12)
 
 

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from clutch_model.plant import kernels as K
+from clutch_model.plant.friction import friction_grid
 from clutch_model.plant.params import load_model
 from clutch_model.virtual_car.campaign import (CATALOG, DEFAULT_MAGNITUDE, MECHANISM_PARAMETER, CampaignSpec,
                                 _trajectory_pt_cross, friction_is_positive, synthesize_campaign,
@@ -114,8 +115,9 @@ def test_bench_table(twin):
     assert b.slip_speed_rad_s.min() <= 0.01
     assert set(np.round(b.sump_temperature_c, 6)) == {30.0, 75.0, 120.0}
     assert np.all(b.plate_temperature_c > b.sump_temperature_c)
-    mu_true = K.friction_grid(twin.true_model.vector(), b.slip_speed_rad_s, b.pressure_mpa,
-                              b.plate_temperature_c)
+    tm = twin.true_model
+    mu_true = friction_grid(tm.friction_coefficients, tm.friction_exponent, b.slip_speed_rad_s,
+                            b.pressure_mpa, b.plate_temperature_c)
     res = b.friction_coefficient - mu_true
     assert 0.002 < res.std() < 0.0045 and abs(res.mean()) < 0.001
 

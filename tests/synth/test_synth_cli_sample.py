@@ -14,7 +14,7 @@ from clutch_sim.commands import synth as synth_cmd
 
 
 def test_cli_choices_match_catalog():
-    assert set(synth_cmd.MECHANISM_IDS) == set(CATALOG)
+    assert set(synth_cmd.mechanism_ids()) == set(CATALOG)
     assert set(synth_cmd.EXTRA_EFFECTS) == set(EXTRA_EFFECTS)
 
 

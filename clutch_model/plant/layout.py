@@ -1,0 +1,20 @@
+"""Layout of the flat float64 parameter vector the compiled kernels read (``ClutchModel.vector()``).
+
+Plant mechanisms own one slot each (0 = off); the mechanism objects
+(``clutch_model.plant.mechanisms``) name the slot they write.
+"""
+R_OUTER, R_INNER, N_FRICTION, N_SEPARATOR, A_RED = 0, 1, 2, 3, 4
+SIGMA, YOUNGS, ASP_DENSITY, ASP_RADIUS, K_PERM, LINING_D, BJ_CHI = 5, 6, 7, 8, 9, 10, 11
+ALPHA0, ALPHA1 = 12, 13
+PLATE_HEAT_CAPACITY, B1, B2, B3, B4, HTF_MIN = 14, 15, 16, 17, 18, 19
+FRICTION_I = 20
+FRICTION_A = 21  # a0..a19 at 21..40
+H0 = 41
+LOCK_SLIP = 42
+# plant mechanisms (0 = off)
+LAG_TAU_S, HYST_RATIO, PRELOAD_N, ENERGY_SCALE_J, DRAG_COEFF = 43, 44, 45, 46, 47
+N_PARAMS = 48
+
+N_FRICTION_COEFFS = 20
+DEFAULT_LOCK_SLIP_RAD_S = 1e-3
+

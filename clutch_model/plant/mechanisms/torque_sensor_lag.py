@@ -1,0 +1,51 @@
+"""torque_sensor_lag: the torque sensor (or its filter / bus averaging) is band-limited."""
+import numpy as np
+
+from clutch_model.plant.mechanisms.base import Mechanism, Parameter, ParamSpec, VirtualCarRange, run_bounds
+
+
+class TorqueSensorLag(Mechanism):
+    id = "torque_sensor_lag"
+    path = "measurement"
+    parameters = (Parameter("tau_s", "s", (0.0, 10.0), "time constant of the sensor's low-pass"),)
+    physics = ("measured = first-order low-pass of the plant torque (time constant tau_s), "
+               "started at each bag's first plant torque")
+    virtual_car = VirtualCarRange(visible=(0.02, 0.2), default=0.06)
+    diagnosis_candidate = False    # not yet among diagnose's candidates
+
+    @classmethod
+    def search_space(cls, scale):
+        return [ParamSpec("tau_s", True, 1e-4, 2.0, np.geomspace(0.003, 0.8, 12))]
+
+    def apply_to_measurement(self, t, torque, run_start):
+        return lowpass_signal(t, torque, run_start, self.values["tau_s"])
+
+
+def lowpass_signal(t, u, run_start, tau_s, hold: bool = False):
+    """First-order low-pass tau y' = u - y of each run, y = u at the run's first row.
+
+    Exact discretisation on an irregular grid: ``u`` linear between samples (default) or
+    held (``hold=True``, zero-order hold), with a = exp(-dt/tau), c = (1 - a) tau/dt:
+        linear: y[k+1] = u[k+1] + a (y[k] - u[k]) - c (u[k+1] - u[k])
+        held:   y[k+1] = u[k]   + a (y[k] - u[k])
+    Works on a 1-D trace or on (n_sets, n) traces sharing ``t``."""
+    t = np.asarray(t, dtype=float)
+    u = np.asarray(u, dtype=float)
+    if tau_s <= 0.0:
+        return u.copy()
+    dt = np.diff(t)
+    x = np.where(dt > 0, dt / tau_s, 0.0)
+    a = np.exp(-x)
+    c = np.where(x > 0, -np.expm1(-x) / np.where(x > 0, x, 1.0), 1.0)
+    uu = u.T                       # time first: rows are samples
+    y = np.empty_like(uu)
+    for lo, hi in run_bounds(run_start, t.size):
+        y[lo] = uu[lo]
+        for k in range(lo, hi - 1):
+            if dt[k] <= 0.0:
+                y[k + 1] = y[k]
+            elif hold:
+                y[k + 1] = uu[k] + a[k] * (y[k] - uu[k])
+            else:
+                y[k + 1] = uu[k + 1] + a[k] * (y[k] - uu[k]) - c[k] * (uu[k + 1] - uu[k])
+    return y.T.copy() if u.ndim > 1 else y
