@@ -4,10 +4,12 @@ A residual (measured - predicted torque) holds structure when something fitted o
 training rows predicts it on held-out rows better than a noise model does. "Better" is
 measured the way a forecaster is judged:
 
-- each model under comparison is a predictor of the held-out residual *plus* its own AR noise
-  model (noise_model.py), fitted on the training rows of its own residual. Its one-step
-  prediction of row t uses the inputs (the candidate's predicted change in torque) and the
-  residual's own past, and its Gaussian log-likelihood scores the prediction;
+- each model under comparison is a predictor of the held-out residual *plus* an AR noise
+  model (noise_model.py), fitted on the training rows of the alternative's residual (the noise
+  as the alternative sees it; the null's own residual would teach the AR to forecast a smooth
+  or periodic misfit from its own past). Its one-step prediction of row t uses the inputs (the
+  candidate's predicted change in torque) and the residual's own past, and its Gaussian
+  log-likelihood scores the prediction;
 - the null model is the noise model alone, fitted to the data: coloured noise (AR(1) with
   phi = 0.95, a 10 Hz sensor filter, values held at 10 Hz, a median filter, slow drift) is
   predictable from its own past, so the null already gets that credit and coloured noise is
@@ -133,8 +135,13 @@ def compare_residuals(resid_null: np.ndarray, resid_alt: np.ndarray, train_mask:
     both = np.isfinite(resid_null) & np.isfinite(resid_alt)
     rn = np.where(both, resid_null, np.nan)
     ra = np.where(both, resid_alt, np.nan)
-    nm_null = noise_null or _own_noise(rn, train_mask, run_start, max_order)
+    # one noise model for both, fitted to the alternative's residual on the training rows (the
+    # noise covariance estimated under the alternative, as a Wald test does): under the null the
+    # two residuals are the same noise; under the alternative the null's residual carries the
+    # structure, which a noise model fitted to it would otherwise learn to forecast from its
+    # own past (a smooth or periodic misfit is predictable one step ahead).
     nm_alt = _own_noise(ra, train_mask, run_start, max_order)
+    nm_null = noise_null or nm_alt
     en, vn = nm_null.innovations(rn, run_start)
     ea, va = nm_alt.innovations(ra, run_start)
     lln = -0.5 * (np.log(vn) + en * en / vn)
