@@ -335,24 +335,8 @@ def input_features(signals: dict, t: np.ndarray, run_start: np.ndarray, torque: 
     return names, np.column_stack(cols)
 
 
-def per_run_structure_test(residual: np.ndarray, X: np.ndarray, train_mask, test_mask, run_start, t,
-                           feature_names=None, alpha: float = ALPHA, min_gain_frac: float = MIN_GAIN_FRAC,
-                           block_s: float = BLOCK_S, max_order: int = DEFAULT_MAX_ORDER) -> StructureResult:
-    """Structure the inputs predict up to per-run coefficients (a once-per-revolution ripple
-    whose phase differs from run to run: sin and cos of the slip angle, with coefficients of
-    each run's own). Within each held-out run, each block is predicted from a GLS fit of the
-    columns X on that run's *other* blocks (cross-fitting; rows whose AR history reaches into
-    the predicted block are left out of its fit), and the correction is then tested like any
-    candidate against the noise model fitted on the training rows."""
-    r = np.asarray(residual, float)
-    X = np.asarray(X, float)
-    ok_train = train_mask & np.isfinite(r)
-    nm = fit_noise_model(r, run_start, ok_train, max_order=max_order)
-    rows_all = test_mask & np.isfinite(r) & np.all(np.isfinite(X), axis=1)
-    scale = np.sqrt(np.mean(X[rows_all] ** 2, axis=0)) if rows_all.any() else np.ones(X.shape[1])
-    Xs = X / np.where(scale > 0, scale, 1.0)
-    lab = block_labels(t, rows_all, run_start, block_s)
-    run_id = np.cumsum(run_start) - 1
+def _cross_fit_per_run(r, Xs, rows_all, lab, run_id, run_start, nm):
+    """Each block of each run predicted from a GLS fit of Xs on the run's other blocks."""
     corr = np.zeros(r.size)
     p = nm.order
     for j in np.unique(run_id[rows_all]):
@@ -370,9 +354,36 @@ def per_run_structure_test(residual: np.ndarray, X: np.ndarray, train_mask, test
             reach[idx[-1] + 1:min(idx[-1] + 1 + p, r.size)] = True   # history inside block b
             fit = rows_j & ~inb & ~reach & np.isfinite(ew)
             A = Xw[fit]
-            lam = 1e-6 * float(np.trace(A.T @ A)) / max(A.shape[1], 1)
+            lam = 1e-6 * float(np.trace(A.T @ A)) / max(A.shape[1], 1) + 1e-12
             beta = np.linalg.solve(A.T @ A + lam * np.eye(A.shape[1]), A.T @ ew[fit])
             corr[inb] = Xs[inb] @ beta
+    return corr
+
+
+def per_run_structure_test(residual: np.ndarray, X: np.ndarray, train_mask, test_mask, run_start, t,
+                           feature_names=None, alpha: float = ALPHA, min_gain_frac: float = MIN_GAIN_FRAC,
+                           block_s: float = BLOCK_S, max_order: int = DEFAULT_MAX_ORDER) -> StructureResult:
+    """Structure the inputs predict up to per-run coefficients (a once-per-revolution ripple
+    whose phase differs from run to run: sin and cos of the slip angle, with coefficients of
+    each run's own). Within each run, each block is predicted from a GLS fit of the
+    columns X on that run's *other* blocks (cross-fitting; rows whose AR history reaches into
+    the predicted block are left out of its fit), and the correction is then tested like any
+    candidate against the noise model fitted on the training rows."""
+    r = np.asarray(residual, float)
+    X = np.asarray(X, float)
+    ok_train = train_mask & np.isfinite(r)
+    # every run is cross-fitted (the training runs too, so the noise model is fitted to what
+    # the per-run model leaves there), twice: the second pass whitens with that noise model
+    rows_all = (train_mask | test_mask) & np.isfinite(r) & np.all(np.isfinite(X), axis=1)
+    scale = np.sqrt(np.mean(X[rows_all] ** 2, axis=0)) if rows_all.any() else np.ones(X.shape[1])
+    Xs = X / np.where(scale > 0, scale, 1.0)
+    lab = block_labels(t, rows_all, run_start, block_s)
+    run_id = np.cumsum(run_start) - 1
+    nm = fit_noise_model(r, run_start, ok_train, max_order=max_order)
+    corr = np.zeros(r.size)
+    for _ in range(2):
+        corr = _cross_fit_per_run(r, Xs, rows_all, lab, run_id, run_start, nm)
+        nm = fit_noise_model(r - corr, run_start, ok_train, max_order=max_order)
     cmp = candidate_test(r, corr, train_mask, test_mask, run_start, t, block_s=block_s, max_order=max_order)
     return StructureResult(structured=cmp.significant(alpha, min_gain_frac), comparison=cmp, coefficients=None,
                            feature_names=list(feature_names or []), prediction=corr)
