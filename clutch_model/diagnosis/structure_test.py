@@ -232,6 +232,48 @@ def _ridge_gcv(Xw: np.ndarray, yw: np.ndarray, lambdas=None):
     return beta, lam
 
 
+def _ridge_grouped_cv(Xw: np.ndarray, yw: np.ndarray, groups: np.ndarray, lambdas=None):
+    """Ridge penalty by grouped cross-validation (leave one group of rows out: a run, or a
+    contiguous chunk of a long run), from per-group Gram matrices: the flexible model must
+    predict runs it was not fitted on, so a library column that only extrapolates (a slip^2
+    fitted inside the fit runs' range) is shrunk rather than trusted."""
+    k = Xw.shape[1]
+    uniq = np.unique(groups)
+    if uniq.size < 3:
+        return _ridge_gcv(Xw, yw, lambdas)
+    G = np.zeros((uniq.size, k, k))
+    h = np.zeros((uniq.size, k))
+    yy = np.zeros(uniq.size)
+    for j, g in enumerate(uniq):
+        sel = groups == g
+        A = Xw[sel]
+        G[j] = A.T @ A
+        h[j] = A.T @ yw[sel]
+        yy[j] = float(yw[sel] @ yw[sel])
+    Gt, ht = G.sum(axis=0), h.sum(axis=0)
+    scale = float(np.trace(Gt)) / k
+    lambdas = lambdas if lambdas is not None else scale * np.geomspace(1e-7, 10.0, 17)
+    best = None
+    for lam in lambdas:
+        err = 0.0
+        for j in range(uniq.size):
+            beta = np.linalg.solve(Gt - G[j] + lam * np.eye(k), ht - h[j])
+            err += yy[j] - 2 * beta @ h[j] + beta @ G[j] @ beta
+        if best is None or err < best[0]:
+            best = (err, lam)
+    lam = best[1]
+    return np.linalg.solve(Gt + lam * np.eye(k), ht), lam
+
+
+def _cv_groups(rows: np.ndarray, run_start: np.ndarray, n_chunks: int = 5) -> np.ndarray:
+    """Group labels of the given rows: runs, or n_chunks contiguous chunks when fewer than 3
+    runs have rows."""
+    run_id = (np.cumsum(run_start) - 1)[rows]
+    if np.unique(run_id).size >= 3:
+        return run_id
+    return np.arange(rows.size) * n_chunks // max(rows.size, 1)
+
+
 def fit_flexible(residual: np.ndarray, X: np.ndarray, train_mask: np.ndarray, run_start: np.ndarray,
                  iterations: int = 2, max_order: int = DEFAULT_MAX_ORDER, ridge: bool = True):
     """Ridge regression of the residual on the feature columns X, by feasible GLS: the AR noise
@@ -252,7 +294,7 @@ def fit_flexible(residual: np.ndarray, X: np.ndarray, train_mask: np.ndarray, ru
         yw = nm.innovations(np.where(ok, r, np.nan), run_start)[0][rows]
         Xw = _whiten_columns(nm, Xs, segs)[rows]
         if ridge:
-            beta, _ = _ridge_gcv(Xw, yw)
+            beta, _ = _ridge_grouped_cv(Xw, yw, _cv_groups(rows, run_start))
         else:
             beta = np.linalg.lstsq(Xw, yw, rcond=None)[0]
         rem = r - Xs @ beta
