@@ -33,7 +33,8 @@ import numpy as np
 from clutch_model.diagnosis.noise_model import DEFAULT_MAX_ORDER
 from clutch_model.diagnosis.structure_test import (ALPHA, BLOCK_S, MIN_GAIN_FRAC, PredictiveComparison,
                                                    StructureResult, block_labels, compare_residuals,
-                                                   per_run_structure_test, structure_test)
+                                                   held_out_excess_test, per_run_structure_test,
+                                                   structure_test)
 
 LOOKALIKE_ALPHA = 0.01   # a runner-up is a lookalike unless the best beats it at this level (one-sided)
 MAX_CAUSES = 3
@@ -161,7 +162,7 @@ def _remainder_test(data, resid, alpha, min_gain_frac, max_order):
     at alpha / 2); the more significant result is returned."""
     if data.features is None:
         return None
-    tests = 2 if data.per_run_features is not None else 1
+    tests = 3 if data.per_run_features is not None else 2
     res = structure_test(resid, data.features, data.train_mask, data.test_mask, data.run_start, data.t,
                          feature_names=data.feature_names, alpha=alpha / tests, min_gain_frac=min_gain_frac,
                          max_order=max_order)
@@ -172,6 +173,12 @@ def _remainder_test(data, resid, alpha, min_gain_frac, max_order):
         if per_run.structured and not res.structured or per_run.comparison.t_stat > res.comparison.t_stat:
             if per_run.structured or not res.structured:
                 res = per_run
+    if not res.structured:
+        # structure the training rows do not show: the held-out rows' noise is larger
+        excess = held_out_excess_test(resid, data.train_mask, data.test_mask, data.run_start, data.t,
+                                      alpha=alpha / tests, max_order=max_order)
+        if excess.structured:
+            res = excess
     return res
 
 
