@@ -10,7 +10,6 @@ VENV   := $(CURDIR)/.venv
 VPY    := $(VENV)/bin/python
 PYTEST_ARGS ?=
 
-export NUMBA_CACHE_DIR := $(CURDIR)/.numba_cache
 export PIP_DISABLE_PIP_VERSION_CHECK := 1
 
 REQ_STAMP      := $(VENV)/.requirements.stamp

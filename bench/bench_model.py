@@ -10,13 +10,11 @@ replay >= 100x; batch >= 5,000 simulated s per wall s.
 """
 from __future__ import annotations
 
-import os
 import sys
 import tempfile
 import time
 from pathlib import Path
 
-os.environ.setdefault("NUMBA_CACHE_DIR", str(Path(__file__).resolve().parents[1] / ".numba_cache"))
 
 import numpy as np  # noqa: E402
 

@@ -30,7 +30,6 @@ import time
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
-os.environ.setdefault("NUMBA_CACHE_DIR", str(REPO / ".numba_cache"))
 sys.path.insert(0, str(REPO))
 
 TARGETS = {"step_pct_of_period": 5.0, "node_cpu_pct": 60.0, "on_time_pct": 99.0,

@@ -1,4 +1,4 @@
-"""Offline replay of car-test runs through a model (`clutch-sim replay`).
+"""Offline replay of car-test runs through a model (`clutch-sim replay`; grid and timing: docs/bags.md).
 
 The runs are predicted as one campaign by ``clutch_model.prediction.predict_campaign``: the
 plant restarts at each run (film at initial.film_thickness, pack at the first sump sample,
@@ -7,7 +7,6 @@ actuator states neutral) while the dissipated energy carries from one run to the
 """
 from __future__ import annotations
 
-import csv
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -18,6 +17,7 @@ from clutch_model.formats.bag_reader import Campaign
 from clutch_model.plant.params import ClutchModel
 from clutch_model.plant.simulate import SimResult
 from clutch_model.prediction import predict_campaign
+from clutch_model.formats.table_csv import write_table_csv
 
 
 @dataclass(frozen=True)
@@ -71,33 +71,34 @@ def replay_runs(model: ClutchModel, runs, energy0_j: float | None = None) -> Rep
     return ReplayResult(campaign=campaign, sim=pred.sim, torque_sim=pred.torque_nm)
 
 
-def write_replay_csv(result: ReplayResult, path) -> Path:
-    """OUT.csv: bag,t,torque_sim,pack_temperature_sim[,torque_measured][,pack_temperature_measured]."""
-    path = Path(path)
-    runs = result.campaign.runs
-    has_torque = any(r.torque_measured_nm is not None for r in runs)
-    has_pack = any(r.pack_temperature_measured_c is not None for r in runs)
-    header = ["bag", "t", "torque_sim", "pack_temperature_sim"]
+def replay_csv_header(has_torque: bool, has_pack: bool) -> list:
+    header = ["bag", "t", "torque_sim", "pack_temperature_sim", "locked"]
     if has_torque:
         header.append("torque_measured")
     if has_pack:
         header.append("pack_temperature_measured")
-    path.parent.mkdir(parents=True, exist_ok=True)
+    return header
 
-    def fmt(x):
-        return "" if not np.isfinite(x) else repr(float(x))
 
-    with path.open("w", newline="") as fh:
-        writer = csv.writer(fh)
-        writer.writerow(header)
-        for r, sl in result.campaign.slices():
-            cols = [r.t, result.torque_sim[sl], result.sim.pack_temperature_c[sl]]
-            if has_torque:
-                cols.append(r.torque_measured_nm if r.torque_measured_nm is not None else np.full(len(r), np.nan))
-            if has_pack:
-                cols.append(r.pack_temperature_measured_c if r.pack_temperature_measured_c is not None
-                            else np.full(len(r), np.nan))
-            for k in range(len(r)):
-                writer.writerow([r.name] + [fmt(c[k]) for c in cols])
-            fh.flush()
-    return path
+def replay_csv_blocks(result: ReplayResult, has_torque: bool, has_pack: bool):
+    """(bag name, columns of replay_csv_header) per run of ``result``."""
+    for r, sl in result.campaign.slices():
+        cols = [r.t, result.torque_sim[sl], result.sim.pack_temperature_c[sl],
+                result.sim.locked[sl].astype(np.int64)]
+        if has_torque:
+            cols.append(r.torque_measured_nm if r.torque_measured_nm is not None else np.full(len(r), np.nan))
+        if has_pack:
+            cols.append(r.pack_temperature_measured_c if r.pack_temperature_measured_c is not None
+                        else np.full(len(r), np.nan))
+        yield r.name, cols
+
+
+def write_replay_csv(result: ReplayResult, path) -> Path:
+    """OUT.csv: bag,t,torque_sim,pack_temperature_sim,locked[,torque_measured][,pack_temperature_measured].
+
+    ``locked`` is 1 where the model reports the static capacity (|slip| < lock_slip_rad_s)."""
+    runs = result.campaign.runs
+    has_torque = any(r.torque_measured_nm is not None for r in runs)
+    has_pack = any(r.pack_temperature_measured_c is not None for r in runs)
+    return write_table_csv(path, replay_csv_header(has_torque, has_pack),
+                           replay_csv_blocks(result, has_torque, has_pack))

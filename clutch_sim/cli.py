@@ -9,11 +9,10 @@ from __future__ import annotations
 
 import argparse
 import importlib
-import os
 import sys
 
 COMMANDS = ["replay", "synth", "fit_friction", "fit_thermal", "calibrate", "montecarlo",
-            "sensitivity", "diagnose", "play", "record"]
+            "sensitivity", "diagnose", "play", "record", "driveline"]
 
 
 def add_params_option(parser: argparse.ArgumentParser) -> None:
@@ -42,8 +41,6 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> int:
-    os.environ.setdefault("NUMBA_CACHE_DIR", os.path.join(os.path.dirname(os.path.dirname(
-        os.path.abspath(__file__))), ".numba_cache"))
     from clutch_model.errors import ClutchSimError
 
     parser = build_parser()

@@ -40,7 +40,6 @@ def node_command(namespace: str, *, sim_time: bool = True, clutch_params_file: O
 def node_env(domain_id: int) -> dict:
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain_id))
     env["PYTHONPATH"] = os.pathsep.join(p for p in (str(REPO), env.get("PYTHONPATH", "")) if p)
-    env.setdefault("NUMBA_CACHE_DIR", str(REPO / ".numba_cache"))
     return env
 
 

@@ -4,7 +4,7 @@ lock-step with /clock.
     clutch-sim-node --ros-args -r __ns:=/clutch --params-file config/clutch_sim.yaml
     python -m clutch_sim_ros.node --ros-args -p use_sim_time:=true
 
-Topics (relative names, so a namespace or remap places them; see CONTRACT.md):
+Topics (relative names, so a namespace or remap places them; docs/interfaces.md):
   in   applied_force (std_msgs/Float64, N), slip_speed (std_msgs/Float64, rad/s),
        sump_temperature (sensor_msgs/Temperature, C)
   out  clutch_torque (std_msgs/Float64, N m), pack_temperature (sensor_msgs/Temperature, C),
@@ -46,7 +46,7 @@ restarts the plant.
 Start-up and inputs. Until the first valid sample of every input has arrived the plant is
 held at its initial state and nothing is published. The first tick with all inputs starts the
 plant (film at initial.film_thickness, pack at the sump temperature, pack force = applied
-force, energy 0). Invalid input messages (CONTRACT "Input validity") are rejected, counted on
+force, energy 0). Invalid input messages (docs/interfaces.md, "Input validity") are rejected, counted on
 /diagnostics and the last good value is held; a negative force is valid (the model counts it
 as 0). An input without a valid message for input_timeout_s is stale (diagnostics WARN, ERROR
 after 10 x): a stale applied force is treated as 0 N, which opens the clutch -- the safe state

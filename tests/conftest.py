@@ -1,4 +1,1 @@
-import os
-import pathlib
-
-os.environ.setdefault("NUMBA_CACHE_DIR", str(pathlib.Path(__file__).resolve().parents[1] / ".numba_cache"))
+"""Shared pytest setup (numba's cache directory is chosen by clutch_model._numba_cache)."""

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Build and install the clutch_msgs ROS 2 interface package into the venv prefix
-# (the venv root is the ROS install prefix of the PyPI ROS wheels; see ROS_WHEELS.md).
+# (the venv root is the ROS install prefix of the PyPI ROS wheels; see README.md, "Install").
 #
 #   tools/build_msgs.sh [--force]        VENV=/path/to/venv overrides .venv
 #

@@ -28,6 +28,7 @@ from clutch_model.plant.params import ClutchModel
 from clutch_model.replay import replay_runs
 from clutch_model.formats.bag_reader import Campaign
 from clutch_model.plant.mechanisms import CATALOG
+from clutch_model.diagnosis.measured_time import measured_time_campaign, topics_unaligned
 from clutch_model.plant.simulate import SimResult
 from clutch_model.diagnosis import features as F
 from clutch_model.diagnosis.candidates import CampaignContext, MechanismCandidate, baseline_fit
@@ -199,8 +200,11 @@ def ripple_columns(campaign: Campaign, torque: np.ndarray):
 
 def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held_out=None,
                       candidates=None, calibrate=None, progress=None, bench_info=None,
-                      checkpoint=None) -> Diagnosis:
-    """Diagnose a campaign given the bench-fitted model. ``calibrate(model, fit_campaign)`` may
+                      checkpoint=None, measured_time=None) -> Diagnosis:
+    """Diagnose a campaign given the bench-fitted model. ``measured_time`` (default: when the
+    torque and force topics are not aligned) compares model and measurement at the measured
+    torque's own stamps (``measured_time_campaign``) instead of the replay grid.
+    ``calibrate(model, fit_campaign)`` may
     add a car-data calibration (regression + Monte Carlo) before the shared friction
     correction; it returns (model, info). ``held_out``: report labels ("bag" or
     "bag[t0:t1]") to hold out instead of the automatic split. ``checkpoint(stage, **outputs)``
@@ -211,7 +215,15 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
     emit = checkpoint or (lambda stage, **kw: None)
 
     # -- stage 1: split ---------------------------------------------------------------------
-    campaign = smooth_sump(runs if isinstance(runs, Campaign) else Campaign(list(runs)))
+    campaign = runs if isinstance(runs, Campaign) else Campaign(list(runs))
+    if measured_time is None:
+        measured_time = topics_unaligned(campaign.runs)
+    if measured_time:
+        # compare where the measurement is: rows at the torque's own stamps, inputs
+        # interpolated between their samples (diagnosis.measured_time)
+        campaign = measured_time_campaign(campaign)
+    campaign = smooth_sump(campaign)
+    # lock-up phases (found from the slip data, diagnosis.lockup): the driveline sets the torque
     campaign, locked = without_locked_rows(campaign)
     names = campaign.names
     if not np.isfinite(campaign.torque_measured).any():

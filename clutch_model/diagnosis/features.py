@@ -15,11 +15,27 @@ import numpy as np
 from clutch_model.formats.bag_reader import Campaign
 
 
+def _finite_rows(residual, run_start):
+    """The residual's finite rows in order, with the run starts carried over: differences are
+    taken between consecutive *measured* rows (on a measured-time grid the rows between torque
+    samples are NaN; lock-up rows are NaN too)."""
+    r = np.asarray(residual, float)
+    run_start = np.asarray(run_start, bool)
+    ok = np.isfinite(r)
+    if ok.all():
+        return r, run_start
+    run_id = np.cumsum(run_start)
+    rid = run_id[ok]
+    rs = np.ones(rid.size, bool)
+    rs[1:] = rid[1:] != rid[:-1]
+    return r[ok], rs
+
+
 def noise_sigma(residual: np.ndarray, run_start: np.ndarray) -> float:
     """Sensor-noise level from the data: robust (MAD) scale of the first differences of the
     residual, / sqrt(2). Slow structure (calibration error, drift, offsets) cancels in the
     differences; isolated steps are outliers the median ignores."""
-    r = np.asarray(residual, float)
+    r, run_start = _finite_rows(residual, run_start)
     d = np.diff(r)
     ok = np.isfinite(d) & ~run_start[1:]
     d = d[ok]
@@ -34,7 +50,7 @@ def noise_ar1(residual: np.ndarray, run_start: np.ndarray) -> float:
     the lag-one autocorrelation rho of the residual's first differences: rho = -(1 - phi)/2
     (-1/2 for white noise). Differences are clipped at 4 robust sigmas so model-error steps do
     not count. Clipped to [0, 0.9]."""
-    r = np.asarray(residual, float)
+    r, run_start = _finite_rows(residual, run_start)
     d = np.diff(r)
     ok = np.isfinite(d) & ~run_start[1:]
     pair = ok[1:] & ok[:-1]
@@ -60,7 +76,7 @@ def noise_profile(residual: np.ndarray, t: np.ndarray, run_start: np.ndarray, bl
         block = np.floor((t[a:b] - t[a]) / block_s).astype(np.int64)
         for k in np.unique(block):
             rows = a + np.flatnonzero(block == k)
-            d = np.diff(r[rows])
+            d = np.diff(r[rows][np.isfinite(r[rows])])   # consecutive measured rows
             d = d[np.isfinite(d)]
             if d.size >= 20:
                 out[rows] = _robust_rms(d) / math.sqrt(2.0)

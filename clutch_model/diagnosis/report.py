@@ -8,21 +8,10 @@ from pathlib import Path
 
 import numpy as np
 
+from clutch_model.formats.results import jsonable
 from clutch_model.plant.params import save_model
 from clutch_model.diagnosis import features as F
 from clutch_model.diagnosis.engine import Diagnosis
-
-
-def _finite(x):
-    if isinstance(x, dict):
-        return {k: _finite(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_finite(v) for v in x]
-    if isinstance(x, (float, np.floating)):
-        return float(x) if math.isfinite(x) else None
-    if isinstance(x, np.integer):
-        return int(x)
-    return x
 
 
 def report_dict(d: Diagnosis) -> dict:
@@ -52,7 +41,7 @@ def report_dict(d: Diagnosis) -> dict:
 
     cause = {"id": d.cause_id, "evidence": d.evidence, "parameters": d.cause_parameters,
              "parameters_ci95": d.cause_ci95}
-    return _finite({
+    return jsonable({
         "status": "complete",
         "cause": cause,
         "causes": d.causes,
@@ -214,7 +203,7 @@ class ProgressiveReport:
     def _partial(self, status: str, **fields):
         self.partial.update(fields)
         self.partial["status"] = status
-        _write_text(self.out / "report.json", json.dumps(_finite(self.partial), indent=2, allow_nan=False))
+        _write_text(self.out / "report.json", json.dumps(jsonable(self.partial), indent=2, allow_nan=False))
 
     def __call__(self, stage: str, **kw):
         if stage == "split":
@@ -239,7 +228,7 @@ def write_report(d: Diagnosis, out_dir) -> dict:
     _save_model(d.extended_model, out / "extended_model.yaml",
                 f"clutch-sim diagnose: extended model, cause = {d.cause_id}"
                 + (f" ({', '.join(c['id'] for c in d.causes)})" if len(d.causes) > 1 else ""))
-    _write_text(out / "report.json", json.dumps(rep, indent=2, allow_nan=False))
+    _write_text(out / "report.json", json.dumps(jsonable(rep), indent=2, allow_nan=False) + "\n")
     files = _plots(d, out)
     _write_text(out / "report.html", _html(d, rep, files))
     return rep

@@ -2,7 +2,7 @@
 
 - ``read_messages``: every input message of a bag in log-time order, unchanged (real-time
   play republishes them as recorded, invalid ones included: the node rejects those).
-- ``read_run``: the bag on the replay grid of CONTRACT.md, via ``clutch_model.formats.bag_reader.read_bag``
+- ``read_run``: the bag on the replay grid (docs/bags.md), via ``clutch_model.formats.bag_reader.read_bag``
   (the grid offline replay uses, invalid samples dropped): lock-step play publishes exactly
   these rows, so the live outputs equal offline replay.
 """

@@ -1,5 +1,5 @@
 """Car-test runs: reading rosbag2 bags (MCAP or sqlite3 directories, bare .mcap files) with
-rosbags, and putting their samples on the replay grid of CONTRACT.md.
+rosbags, and putting their samples on the replay grid (docs/bags.md).
 
 Grid: one row per `applied_force` message at or after the first sample of every input topic;
 each input is the latest sample at or before the row's time. Samples the ROS node would
@@ -14,19 +14,11 @@ from pathlib import Path
 import numpy as np
 
 from clutch_model.errors import DataError
+from clutch_model.formats.topics import TopicNames
 
 FORCE_MAX_N = 1e6
 SLIP_MAX_RAD_S = 1000.0
 SUMP_RANGE_C = (-40.0, 200.0)
-
-
-@dataclass(frozen=True)
-class TopicNames:
-    applied_force: str = "/clutch/applied_force"
-    slip_speed: str = "/clutch/slip_speed"
-    sump_temperature: str = "/clutch/sump_temperature"
-    measured_torque: str = "/clutch/measured_torque"
-    pack_temperature: str = "/clutch/pack_temperature"
 
 
 @dataclass
@@ -42,6 +34,31 @@ class Run:
     pack_temperature_measured_c: np.ndarray | None = None
     start_time_ns: int = 0
     rejected_samples: int = 0
+    # every topic's own samples as logged (times in s from the bag's first message, valid
+    # samples only, log-time order): {channel: (t_s, values)}, channel one of applied_force,
+    # slip_speed, sump_temperature, measured_torque, pack_temperature. The grid above holds
+    # the latest sample at each force row; diagnosis compares where the measurement is.
+    samples: dict = field(default_factory=dict)
+
+    @property
+    def torque_measured_t(self) -> np.ndarray | None:
+        """Log times (s from the bag's first message) of the measured-torque samples."""
+        s = self.samples.get("measured_torque")
+        return None if s is None else s[0]
+
+    @property
+    def torque_measured_raw_nm(self) -> np.ndarray | None:
+        """The measured-torque samples at their own times ``torque_measured_t``."""
+        s = self.samples.get("measured_torque")
+        return None if s is None else s[1]
+
+    @property
+    def slip_raw_t(self) -> np.ndarray:
+        return self.samples["slip_speed"][0]
+
+    @property
+    def slip_raw_rad_s(self) -> np.ndarray:
+        return self.samples["slip_speed"][1]
 
     @property
     def duration_s(self) -> float:
@@ -109,14 +126,21 @@ def _scalar(msg) -> float:
     return float(msg.data)
 
 
-def _read_topics(path: Path, wanted: list) -> tuple[dict, int]:
+def _read_topics(path: Path, wanted: list, bulk: bool = True) -> tuple[dict, int]:
     """{topic: (log_times_ns int64, values float64)} for the wanted topics present, and the
-    bag's first log time."""
-    from rosbags.highlevel import AnyReader
-    from rosbags.rosbag2 import ReaderError
-
+    bag's first log time. MCAP bags of Float64/Temperature topics are decoded in bulk
+    (``mcap_bulk``, the same numbers); anything else, or ``bulk=False``, one message at a time
+    with rosbags."""
     if not path.exists():
         raise DataError(f"bag not found: {path}")
+    if bulk:
+        from clutch_model.formats.mcap_bulk import read_scalar_topics
+
+        got = read_scalar_topics(path, wanted)
+        if got is not None:
+            return got
+    from rosbags.highlevel import AnyReader
+    from rosbags.rosbag2 import ReaderError
     try:
         with AnyReader([path]) as reader:
             conns = [c for c in reader.connections if c.topic in wanted]
@@ -159,33 +183,42 @@ def _valid(topic_kind: str, values: np.ndarray) -> np.ndarray:
     return ok
 
 
+_CHANNEL = {"force": "applied_force", "slip": "slip_speed", "sump": "sump_temperature"}
+
+
 def _latest(times: np.ndarray, values: np.ndarray, at: np.ndarray) -> np.ndarray:
     idx = np.searchsorted(times, at, side="right") - 1
+    if not idx.size or idx.min() >= 0:           # the usual case: every row has a sample before it
+        return values.take(idx)
     out = np.full(at.size, np.nan)
     ok = idx >= 0
     out[ok] = values[idx[ok]]
     return out
 
 
-def read_bag(path, topics: TopicNames = TopicNames()) -> Run:
-    """Read one car-test bag and put it on the replay grid."""
+def read_bag(path, topics: TopicNames = TopicNames(), bulk: bool = True) -> Run:
+    """Read one car-test bag and put it on the replay grid. ``bulk=False`` forces rosbags'
+    general per-message decoder (the bulk MCAP path gives the same numbers, faster)."""
     path = Path(path)
     wanted = [topics.applied_force, topics.slip_speed, topics.sump_temperature,
               topics.measured_torque, topics.pack_temperature]
-    series, first_ns = _read_topics(path, wanted)
+    series, first_ns = _read_topics(path, wanted, bulk=bulk)
     name = bag_name(path)
     rejected = 0
     inputs = {}
+    samples = {}
     for kind, topic in (("force", topics.applied_force), ("slip", topics.slip_speed),
                         ("sump", topics.sump_temperature)):
         if topic not in series:
             raise DataError(f"bag {name}: missing topic {topic}")
         times, values = series[topic]
         ok = _valid(kind, values)
-        rejected += int((~ok).sum())
-        if not ok.any():
+        n_ok = int(np.count_nonzero(ok))
+        rejected += ok.size - n_ok
+        if not n_ok:
             raise DataError(f"bag {name}: topic {topic} has no valid samples")
-        inputs[kind] = (times[ok], values[ok])
+        inputs[kind] = (times, values) if n_ok == ok.size else (times[ok], values[ok])
+        samples[_CHANNEL[kind]] = ((inputs[kind][0] - first_ns) * 1e-9, inputs[kind][1])
     t0_inputs = max(inputs[k][0][0] for k in inputs)
     rows = inputs["force"][0]
     rows = rows[rows >= t0_inputs]
@@ -199,12 +232,15 @@ def read_bag(path, topics: TopicNames = TopicNames()) -> Run:
         sump_temperature_c=_latest(*inputs["sump"], rows),
         start_time_ns=first_ns,
         rejected_samples=rejected,
+        samples=samples,
     )
-    for attr, topic in (("torque_measured_nm", topics.measured_torque),
-                        ("pack_temperature_measured_c", topics.pack_temperature)):
+    for attr, chan, topic in (("torque_measured_nm", "measured_torque", topics.measured_torque),
+                              ("pack_temperature_measured_c", "pack_temperature", topics.pack_temperature)):
         if topic in series:
             times, values = series[topic]
             setattr(run, attr, _latest(times, values, rows))
+            ok = np.isfinite(values)
+            samples[chan] = ((times[ok] - first_ns) * 1e-9, values[ok])
     return run
 
 

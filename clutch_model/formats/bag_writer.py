@@ -1,4 +1,4 @@
-"""Write car-test bags (CONTRACT.md, "Car-test bags") from arrays, without ROS.
+"""Write car-test bags (docs/bags.md) from arrays, without ROS.
 
 One run = one rosbag2 bag (version 9) written with ``rosbags``:
 
@@ -180,13 +180,13 @@ def write_run_bag(path, run_signals, storage: str = "mcap",
         except WriterError as exc:
             raise DataError(f"cannot write bag {path}: {exc}") from None
         with writer:
-            conns, makers = [], []
-            for key in chans:
+            conns, payloads = [], []
+            for ci, key in enumerate(chans):
                 conns.append(writer.add_connection(names[key], MSGTYPES[key], typestore=ts))
-                makers.append(_message_maker(ts, key, chans[key]))
-            for k in order:
-                c = int(all_c[k])
-                writer.write(conns[c], int(all_ns[k]), makers[c](int(all_i[k]), int(all_ns[k])))
+                payloads.append(_payloads(key, chans[key], stamps[ci]))
+            write = writer.write
+            for c, i, ns in zip(all_c[order].tolist(), all_i[order].tolist(), all_ns[order].tolist()):
+                write(conns[c], ns, payloads[c][i])
         if storage == "mcap" and compression == "lz4":
             _rechunk_lz4(bag_dir / f"{bag_dir.name}.mcap")
         if bare:
@@ -202,6 +202,7 @@ def write_run_bag(path, run_signals, storage: str = "mcap",
 
 
 def _message_maker(ts, key, series: TopicSeries):
+    """Per-message CDR serializer with rosbags (the reference ``_payloads`` is checked against)."""
     msgtype = MSGTYPES[key]
     values = series.values
     if msgtype == FLOAT64:
@@ -221,6 +222,36 @@ def _message_maker(ts, key, series: TopicSeries):
         return ts.serialize_cdr(Temperature(header=hdr, temperature=float(values[i]), variance=var),
                                 TEMPERATURE)
     return make_t
+
+
+def _payloads(key, series: TopicSeries, stamps_ns: np.ndarray) -> list:
+    """The CDR bytes of every message of a channel, built in bulk with numpy (the same bytes as
+    rosbags' serializer, ``_message_maker``; an hour at 1 kHz in seconds, not minutes).
+    Float64: encapsulation header 00 01 00 00 + float64. Temperature: header + int32 sec +
+    uint32 nanosec + uint32 len(frame_id)+1 + frame_id + NUL, zero padding to 8 (payload
+    offsets), float64 temperature, float64 variance."""
+    values = np.asarray(series.values, dtype="<f8")
+    n = values.size
+    if MSGTYPES[key] == FLOAT64:
+        rec = np.zeros(n, dtype=[("encap", "V4"), ("data", "<f8")])
+        rec["encap"] = np.void(b"\x00\x01\x00\x00")
+        rec["data"] = values
+    else:
+        frame = FRAME_IDS.get(key, "").encode() + b"\x00"
+        pad = (-(12 + len(frame))) % 8
+        stamps_ns = np.asarray(stamps_ns, dtype=np.int64)
+        rec = np.zeros(n, dtype=[("encap", "V4"), ("sec", "<i4"), ("nanosec", "<u4"), ("len", "<u4"),
+                                 ("frame", f"V{len(frame) + pad}"), ("temperature", "<f8"), ("variance", "<f8")])
+        rec["encap"] = np.void(b"\x00\x01\x00\x00")
+        rec["sec"] = stamps_ns // 1_000_000_000
+        rec["nanosec"] = stamps_ns % 1_000_000_000
+        rec["len"] = len(frame)
+        rec["frame"] = np.void(frame + b"\x00" * pad)
+        rec["temperature"] = values
+        rec["variance"] = float(series.variance)
+    size = rec.dtype.itemsize
+    buf = rec.tobytes()
+    return [buf[k:k + size] for k in range(0, n * size, size)]
 
 
 def _rechunk_lz4(mcap_path: Path) -> None:

@@ -4,7 +4,7 @@ The SAE#2 (SAE J2490 μPVT) bench holds slip speed and sump temperature constant
 apply pressure, and logs plate temperature and the friction coefficient; then it moves to the
 next slip speed, and the whole sweep is repeated at other sump temperatures.
 
-File format (CONTRACT.md, "Bench data"): a CSV file whose header holds the five columns
+File format (docs/bags.md, "Bench data"): a CSV file whose header holds the five columns
 
     slip_speed_rad_s,pressure_mpa,plate_temperature_c,sump_temperature_c,friction_coefficient
 

@@ -1,13 +1,15 @@
 """A rosbags typestore that knows the clutch-sim interfaces, so bags holding
 ``clutch_msgs/msg/ClutchState`` are read and written without ROS.
 
-The message text is the one rosidl compiles (msg_defs/clutch_msgs/msg/ClutchState.msg), so the
-RIHS01 type hash rosbags computes equals the one of the compiled interface.
+The message text ships as package data (clutch_model/data/ClutchState.msg, a copy of the
+msg_defs/clutch_msgs/msg/ClutchState.msg rosidl compiles; a test keeps the two identical), so the
+RIHS01 type hash rosbags computes equals the one of the compiled interface, in a checkout and in
+an installed wheel alike.
 """
 from __future__ import annotations
 
-import sys
 from functools import lru_cache
+from importlib import resources
 from pathlib import Path
 
 from rosbags.typesys import Stores, get_typestore, get_types_from_msg
@@ -16,16 +18,14 @@ from rosbags.typesys.store import Typestore
 from clutch_model.errors import DataError
 
 CLUTCH_STATE = "clutch_msgs/msg/ClutchState"
-_REPO_MSG = Path(__file__).resolve().parents[2] / "msg_defs" / "clutch_msgs" / "msg" / "ClutchState.msg"
-_INSTALLED_MSG = Path(sys.prefix) / "share" / "clutch_msgs" / "msg" / "ClutchState.msg"
+_PACKAGED_MSG = Path(str(resources.files("clutch_model") / "data" / "ClutchState.msg"))
 
 
 def clutch_state_msg_path() -> Path:
-    """The ClutchState.msg definition: the source tree's, else the installed one."""
-    for path in (_REPO_MSG, _INSTALLED_MSG):
-        if path.is_file():
-            return path
-    raise DataError(f"ClutchState.msg not found (looked at {_REPO_MSG} and {_INSTALLED_MSG})")
+    """The ClutchState.msg definition shipped with the package."""
+    if not _PACKAGED_MSG.is_file():
+        raise DataError(f"ClutchState.msg not found at {_PACKAGED_MSG} (broken installation)")
+    return _PACKAGED_MSG
 
 
 @lru_cache(maxsize=1)

@@ -64,23 +64,5 @@ def parse_coefficients(text: str, keep_order: bool = False) -> list:
     return sorted(set(out))
 
 
-def jsonable(obj):
-    """Plain JSON types, non-finite floats as null (for the JSON sidecars)."""
-    import math
-
-    import numpy as np
-
-    if isinstance(obj, dict):
-        return {str(k): jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [jsonable(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return [jsonable(v) for v in obj.tolist()]
-    if isinstance(obj, (bool, np.bool_)):
-        return bool(obj)
-    if isinstance(obj, (int, np.integer)):
-        return int(obj)
-    if isinstance(obj, (float, np.floating)):
-        x = float(obj)
-        return x if math.isfinite(x) else None
-    return obj
+# the project-wide JSON cleaner (kept importable from here for older callers)
+from clutch_model.formats.results import jsonable  # noqa: E402,F401

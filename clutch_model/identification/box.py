@@ -29,7 +29,7 @@ from clutch_model.plant.friction import (BLOCK_OF, BLOCKS, CAR_P_BOX, CAR_THETA_
                                          friction_min_grid, friction_positive, friction_positive_many,
                                          poly_candidates, poly_range)
 
-# the polynomials are constrained on P_BOX x THETA_BOX (thesis §5.2.1)
+# the polynomials are constrained on P_BOX x THETA_BOX (thesis §5.2.1, docs/model.md)
 COEFF_NAMES = [f"a{k}" for k in range(20)]
 
 # chapter 4 inequalities (strict ones get a tiny margin in the fitter)

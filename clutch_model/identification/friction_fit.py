@@ -19,7 +19,6 @@ from the linear LS of step 1 (step 2's are conditional on mu_S).
 """
 from __future__ import annotations
 
-import json
 import math
 import warnings
 from dataclasses import dataclass, field
@@ -28,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from clutch_model.errors import DataError, FitError
+from clutch_model.formats.results import finite_or_none, write_json
 from clutch_model.plant.params import ClutchModel, load_model, save_model
 from clutch_model.identification import box
 from clutch_model.plant.friction import monomials, stribeck
@@ -135,9 +135,7 @@ class FrictionFitResult:
         path = Path(path)
         save_model(self.model, path, header=self.header())
         json_path = Path(json_path) if json_path else sidecar_path(path)
-        from clutch_model.identification import jsonable
-
-        json_path.write_text(json.dumps(jsonable(self.to_json()), indent=2, allow_nan=False))
+        write_json(json_path, self.to_json())
         return path, json_path
 
 
@@ -146,9 +144,7 @@ def sidecar_path(path) -> Path:
     return path.with_name(path.stem + ".fit.json")
 
 
-def _jnum(x):
-    x = float(x)
-    return x if math.isfinite(x) else None
+_jnum = finite_or_none
 
 
 # --- the fit ----------------------------------------------------------------------------------------

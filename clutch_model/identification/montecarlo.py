@@ -15,7 +15,6 @@
 """
 from __future__ import annotations
 
-import json
 import math
 import time
 from dataclasses import dataclass, field
@@ -24,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from clutch_model.errors import FitError
+from clutch_model.formats.results import finite_or_none, write_json
 from clutch_model.plant.params import ClutchModel, save_model
 from clutch_model.identification import box
 from clutch_model.identification.evaluate import CampaignInputs, as_campaign, chunk_rmse, rmse_of
@@ -115,8 +115,7 @@ class MonteCarloResult:
         return lines
 
     def to_json(self) -> dict:
-        def num(x):
-            return float(x) if np.isfinite(x) else None
+        num = finite_or_none
         return {"n_samples": int(self.samples.shape[0]), "n_accepted": self.n_evaluated,
                 "n_better": int(self.better.sum()), "seed": self.seed, "spread": self.spread,
                 "varied": [int(k) for k in self.varied], "rmse_nominal": self.rmse_nominal,
@@ -141,9 +140,7 @@ class MonteCarloResult:
         if self.refined_model is not None:
             save_model(self.refined_model, out / "refined_model.yaml", header="\n".join(self.summary_lines()))
             written.append(out / "refined_model.yaml")
-        from clutch_model.identification import jsonable
-
-        (out / "summary.json").write_text(json.dumps(jsonable(self.to_json()), indent=2, allow_nan=False))
+        write_json(out / "summary.json", self.to_json())
         written.append(out / "summary.json")
         if plots:
             from clutch_model.identification.plots import montecarlo_scatter

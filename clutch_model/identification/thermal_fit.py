@@ -28,6 +28,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from clutch_model.errors import DataError, FitError
+from clutch_model.formats.results import finite_or_none
 from clutch_model.plant.params import ClutchModel
 
 B_NAMES = ("b1", "b2", "b3", "b4")
@@ -166,8 +167,7 @@ class HeatTransferFit:
                 "rmse_pack_after_c": _num(self.rmse_pack_after), "notes": self.notes}
 
 
-def _num(x):
-    return float(x) if np.isfinite(x) else None
+_num = finite_or_none
 
 
 def _uniform(t, *ys):

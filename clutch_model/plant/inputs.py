@@ -1,4 +1,4 @@
-"""Input validity (CONTRACT.md "Input validity") and the held-input channels of the node.
+"""Input validity (docs/interfaces.md, "Input validity") and the held-input channels of the node.
 
 Pure Python, no rclpy. The limits are clutch_model.formats.bag_reader' (offline replay drops the samples
 the node rejects), so the node and offline replay see the same inputs.

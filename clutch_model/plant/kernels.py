@@ -1,4 +1,4 @@
-"""The plant equations (thesis eq. 3.1-3.18, 4.9-4.14, CONTRACT "pinned" details),
+"""The plant equations (thesis eq. 3.1-3.18, 4.9-4.14, the details pinned in docs/model.md),
 compiled with numba. One set of equations serves the step simulator (node), the
 single-trajectory simulator (replay) and the batch simulator (Monte Carlo).
 
@@ -8,6 +8,10 @@ State vector (float64[N_STATE]):
   4 energy E = int |w T| dt [J] 5 sign of the last slip above the lock tolerance
   6 heat power |w T| at the last output [W]
   7 actuator force (lag state) [N]  8 measured-force target of the lag [N]
+  9 slip angle int w dt since the run start, wrapped to [-pi, pi) [rad]
+  10 pack force before the last advance [N]   11 length of the last advance [s]
+  12 heat power |w T| of the output before the last advance (the previous row's) [W]
+  13.. low-pass states of the discovered terms (one per term slot)
 
 Force chain (the pack_force path, mechanisms in catalog order): measured force (negative -> 0)
 -> actuator_lag (first order) -> actuator_hysteresis (play operator) -> spring_preload
@@ -32,8 +36,16 @@ from clutch_model.plant import friction
 from clutch_model.plant import layout as P
 from clutch_model.plant.friction import P_MAX_MPA, THETA_MAX_C
 
-N_STATE = 9
 S_H, S_THETA, S_FHYST, S_FPACK, S_ENERGY, S_SIGN, S_POWER, S_FLAG, S_FTARGET = range(9)
+S_ANGLE, S_FPREV, S_DT, S_PPREV, S_TERM0 = 9, 10, 11, 12, 13
+N_STATE = S_TERM0 + P.MAX_DISCOVERED_TERMS
+
+# signals the discovered terms are built from (clutch_model.discovery.terms names them)
+(SIG_NONE, SIG_PRESSURE, SIG_PACK_TEMP, SIG_SLIP_ABS, SIG_SLIP_POWER, SIG_ENERGY,
+ SIG_FORCE_RATE, SIG_SIN_ANGLE, SIG_COS_ANGLE, SIG_SLIP, SIG_SLIP_SIGN) = range(11)
+TERM_FRICTION, TERM_TORQUE = 1, 2
+THETA_REF_C = 60.0
+DISC_FACTOR_MIN = 0.05
 
 # output record
 N_OUT = 16
@@ -96,6 +108,65 @@ def friction_coefficient(w_abs, pressure_mpa, theta, p):
     """Stribeck mu_f(w, P, theta) of the parameter vector (clutch_model.plant.friction)."""
     return friction.mu(p[P.FRICTION_A:P.FRICTION_A + P.N_FRICTION_COEFFS], p[P.FRICTION_I],
                        w_abs, pressure_mpa, theta)
+
+
+@njit(cache=True)
+def term_signal(code, state, w, pressure_mpa, theta):
+    """Value of one discovered-term signal (SIG_*) at the current state and inputs:
+    contact pressure [MPa], pack temperature above 60 C [C], |slip| [rad/s], slip power of
+    the previous row's output [kW], dissipated energy [MJ], pack-force rate over the last step [kN/s],
+    sin/cos of the slip angle, signed slip [rad/s], sign of slip."""
+    if code == SIG_PRESSURE:
+        return pressure_mpa
+    if code == SIG_PACK_TEMP:
+        return theta - THETA_REF_C
+    if code == SIG_SLIP_ABS:
+        return abs(w)
+    if code == SIG_SLIP_POWER:
+        return state[S_PPREV] * 1e-3
+    if code == SIG_ENERGY:
+        return state[S_ENERGY] * 1e-6
+    if code == SIG_FORCE_RATE:
+        dt = state[S_DT]
+        return (state[S_FPACK] - state[S_FPREV]) / dt * 1e-3 if dt > 0.0 else 0.0
+    if code == SIG_SIN_ANGLE:
+        return math.sin(state[S_ANGLE])
+    if code == SIG_COS_ANGLE:
+        return math.cos(state[S_ANGLE])
+    if code == SIG_SLIP:
+        return w
+    if code == SIG_SLIP_SIGN:
+        return 1.0 if w > 0.0 else (-1.0 if w < 0.0 else 0.0)
+    return 1.0
+
+
+@njit(cache=True)
+def term_raw(p, j, state, w, pressure_mpa, theta):
+    """Product of the two signals of discovered-term slot j (before its low-pass)."""
+    base = P.DISC_SLOTS + P.DISC_SLOT * j
+    g = term_signal(int(p[base + 1]), state, w, pressure_mpa, theta)
+    b = int(p[base + 2])
+    if b != SIG_NONE:
+        g *= term_signal(b, state, w, pressure_mpa, theta)
+    return g
+
+
+@njit(cache=True)
+def discovered_terms(p, state, w, pressure_mpa, theta):
+    """(friction multiplier 1 + sum c g, additive torque sum c g) of the discovered terms."""
+    n = int(p[P.DISC_N])
+    fac = 1.0
+    add = 0.0
+    for j in range(n):
+        base = P.DISC_SLOTS + P.DISC_SLOT * j
+        g = state[S_TERM0 + j] if p[base + 3] > 0.0 else term_raw(p, j, state, w, pressure_mpa, theta)
+        if int(p[base]) == TERM_FRICTION:
+            fac += p[base + 4] * g
+        else:
+            add += p[base + 4] * g
+    if fac < DISC_FACTOR_MIN:
+        fac = DISC_FACTOR_MIN
+    return fac, add
 
 
 @njit(cache=True)
@@ -233,6 +304,12 @@ def init_state(state, applied_force, sump_temperature, p):
     fh, fp = force_chain(f, f, p)
     state[S_FHYST] = fh
     state[S_FPACK] = fp
+    state[S_ANGLE] = 0.0
+    state[S_FPREV] = fp
+    state[S_DT] = 0.0
+    state[S_PPREV] = 0.0
+    for j in range(P.MAX_DISCOVERED_TERMS):
+        state[S_TERM0 + j] = 0.0
 
 
 @njit(cache=True)
@@ -262,6 +339,10 @@ def outputs(state, slip, sump_temperature, p, d, out):
     degr = 1.0
     if p[P.ENERGY_SCALE_J] > 0.0:
         degr = math.exp(-state[S_ENERGY] / p[P.ENERGY_SCALE_J])
+    extra = 0.0
+    if p[P.DISC_N] > 0.0:
+        fac, extra = discovered_terms(p, state, w, pressure_mpa, theta)
+        degr *= fac
     if locked:
         mu_f = friction_coefficient(0.0, pressure_mpa, theta, p) * degr
         t_a = sign * mu_f * pa * d[D_TA_GEOM]
@@ -275,6 +356,7 @@ def outputs(state, slip, sump_temperature, p, d, out):
         phi_fs = 11.1 * hh ** 2.31 * math.exp(-2.38 * hh + 0.11 * hh * hh) if hh <= 5.0 else 0.0
         t_h = w * (phi_f + phi_fs) / h * mu * d[D_TH_GEOM]
         drag = p[P.DRAG_COEFF] * w * mu / d[D_MU60] if p[P.DRAG_COEFF] != 0.0 else 0.0
+        drag += extra
     torque = t_a + t_h + drag
     power = abs(w * torque)
     state[S_POWER] = power
@@ -304,6 +386,11 @@ def advance(state, slip, sump_temperature, dt, p, d, scratch):
     split, so slow input rates (10 Hz) keep the accuracy of fast ones."""
     if not (dt > 0.0):
         return
+    if p[P.DISC_N] > 0.0:
+        _advance_term_filters(state, slip, dt, p, d)   # driven by the last sample's signals
+    state[S_FPREV] = state[S_FPACK]
+    state[S_DT] = dt
+    state[S_PPREV] = state[S_POWER]
     n = int(math.ceil(dt / MAX_STEP_S))
     if n < 1:
         n = 1
@@ -345,6 +432,22 @@ def _advance_once(state, slip, sump_temperature, dt, p, d, scratch):
     state[S_THETA] = theta0 + (q / k - (theta0 - sump)) * frac
     state[S_ENERGY] += heat * dt
     state[S_POWER] = p_end  # heat power at the end of the step (inputs held)
+    a = state[S_ANGLE] + min(max(slip, -SLIP_LIMIT), SLIP_LIMIT) * dt
+    state[S_ANGLE] = a - 2.0 * math.pi * math.floor((a + math.pi) / (2.0 * math.pi))
+
+
+@njit(cache=True)
+def _advance_term_filters(state, slip, dt, p, d):
+    """First-order low-pass (exact for the signal held over dt) of every discovered term
+    that has a time constant, driven by its signal at the last sample (held over the step)."""
+    w = min(max(slip, -SLIP_LIMIT), SLIP_LIMIT)
+    pressure_mpa = min(state[S_FPACK], d[D_FMAX]) / d[D_AN] * 1e-6
+    for j in range(int(p[P.DISC_N])):
+        tau = p[P.DISC_SLOTS + P.DISC_SLOT * j + 3]
+        if tau > 0.0:
+            g = term_raw(p, j, state, w, pressure_mpa, state[S_THETA])
+            x = state[S_TERM0 + j]
+            state[S_TERM0 + j] = x + (g - x) * -math.expm1(-dt / tau)
 
 
 @njit(cache=True)
@@ -361,7 +464,7 @@ def _row(k, state, p, d, t, force, slip, sump, run_start, scratch, out):
 
 @njit(cache=True)
 def run_trajectory(p, t, force, slip, sump, run_start, energy0):
-    """Replay timing of CONTRACT.md: row k's outputs come from the state at t_k (integrated
+    """Replay timing (docs/bags.md): row k's outputs come from the state at t_k (integrated
     from t_{k-1} with row k-1's inputs held) and row k's inputs. A run_start row restarts
     the plant (film, pack temperature, actuator states); energy carries over."""
     n = t.size

@@ -13,7 +13,14 @@ H0 = 41
 LOCK_SLIP = 42
 # plant mechanisms (0 = off)
 LAG_TAU_S, HYST_RATIO, PRELOAD_N, ENERGY_SCALE_J, DRAG_COEFF = 43, 44, 45, 46, 47
-N_PARAMS = 48
+# discovered terms (mechanism `discovered`): count, then MAX_DISCOVERED_TERMS slots of
+# DISC_SLOT floats: kind (1 friction multiplier, 2 additive torque), signal a, signal b
+# (kernels.SIG_*; 0 = none), low-pass time constant tau_s (0 = none), coefficient
+DISC_N = 48
+DISC_SLOTS = 49
+DISC_SLOT = 5
+MAX_DISCOVERED_TERMS = 6
+N_PARAMS = DISC_SLOTS + DISC_SLOT * MAX_DISCOVERED_TERMS
 
 N_FRICTION_COEFFS = 20
 DEFAULT_LOCK_SLIP_RAD_S = 1e-3

@@ -10,6 +10,7 @@ from __future__ import annotations
 import copy
 import math
 from dataclasses import dataclass, field
+from importlib import resources
 from pathlib import Path
 
 import numpy as np
@@ -19,7 +20,8 @@ from clutch_model.errors import ParamsError
 from clutch_model.plant.layout import *  # noqa: F401,F403  (kernel vector layout)
 from clutch_model.plant.mechanisms import mechanism_from_dict, ordered
 
-REFERENCE_CLUTCH = Path(__file__).resolve().parents[2] / "config" / "reference_clutch.yaml"
+# the reference clutch RC-1, shipped as package data (config/reference_clutch.yaml links to it)
+REFERENCE_CLUTCH = Path(str(resources.files("clutch_model") / "data" / "reference_clutch.yaml"))
 
 _REQUIRED = {
     "geometry": ["r_outer", "r_inner", "friction_surfaces", "separator_plates", "non_grooved_fraction"],
@@ -103,8 +105,11 @@ class ClutchModel:
 
     def initial_energy_j(self, start_time_ns: int) -> float:
         """Dissipated campaign energy when a replay starts at ``start_time_ns``."""
-        m = self.mechanism("friction_degradation")
-        return m.energy_at(start_time_ns) if m is not None else 0.0
+        for mech_id in ("friction_degradation", "discovered"):
+            m = self.mechanism(mech_id)
+            if m is not None and m.values.get("energy_history") is not None:
+                return m.energy_at(start_time_ns)
+        return 0.0
 
     def copy(self) -> "ClutchModel":
         return ClutchModel(copy.deepcopy(self.data), [m.copy() for m in self.mechanisms], self.source)
@@ -162,7 +167,7 @@ class ClutchModel:
 
     @property
     def max_pack_force_n(self) -> float:
-        """0.9 * A_N * P_a(0): above it the film has no equilibrium (CONTRACT)."""
+        """0.9 * A_N * P_a(0): above it the film has no equilibrium (docs/model.md)."""
         s = self.data["surface"]
         pa0 = (float(s["youngs_modulus"]) * math.pi * float(s["asperity_density"])
                * float(s["asperity_tip_radius"]) * float(s["rms_roughness"]) / math.sqrt(2 * math.pi))

@@ -1,7 +1,7 @@
 """Simulators over the compiled plant equations, in the manner of scipy's solve_ivp:
 plain arrays in, a result object out.
 
-- ``simulate``: one trajectory over sampled inputs (replay timing of CONTRACT.md).
+- ``simulate``: one trajectory over sampled inputs (replay timing of docs/bags.md).
 - ``simulate_batch``: many parameter sets on the same inputs (Monte Carlo), in parallel.
 - ``Plant``: the real-time step simulator the ROS node drives (state in, inputs held over
   dt, state out).

@@ -88,7 +88,6 @@ bench), so the same spec gives the same arrays.
 """
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -101,6 +100,7 @@ from clutch_model.plant import params as P
 from clutch_model.plant.friction import friction_grid, friction_positive
 from clutch_model.formats.bag_writer import DEFAULT_START_TIME_NS, RunSignals, TopicSeries
 from clutch_model.formats.bench_csv import BenchData
+from clutch_model.formats.results import jsonable, write_json
 from clutch_model.errors import DataError, ParamsError
 from clutch_model.plant.mechanisms import CATALOG, make_mechanism
 from clutch_model.plant.params import ClutchModel, load_model
@@ -601,7 +601,7 @@ def campaign_metadata(spec: CampaignSpec, base: ClutchModel, truth: Truth, hidde
                          if spec.extra_effect else None),
         "campaign_energy_j": e_total,
         "runs": [{"name": r.name, "start_time_ns": r.start_time_ns, **r.schedule} for r in runs],
-        "spec": _jsonable(asdict(spec)),
+        "spec": jsonable(asdict(spec)),
     }
     if spec.mechanism == "friction_degradation":
         meta["friction_factor_at_end"] = math.exp(-e_total / float(hidden.value))
@@ -664,15 +664,6 @@ def _ou(rng, n, dt, tau, sigma):
     return x
 
 
-def _jsonable(obj):
-    if isinstance(obj, dict):
-        return {k: _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, (np.floating, np.integer)):
-        return obj.item()
-    return obj
-
 
 # ------------------------------------------------------------------------------ files
 def run_names(n_runs: int) -> list:
@@ -721,5 +712,5 @@ def write_campaign(result: CampaignResult, out_dir, storage: str = "mcap", compr
             progress(run.name)
         paths["bags"].append(write_run_bag(bag_root / run.name, run.signals, storage=storage,
                                            start_time_ns=run.start_time_ns, compression=compression))
-    paths["metadata"].write_text(json.dumps(result.metadata, indent=1) + "\n")
+    write_json(paths["metadata"], result.metadata, indent=1)
     return paths

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 
 def add_topic_options(parser) -> None:
-    from clutch_model.formats.bag_reader import TopicNames
+    from clutch_model.formats.topics import TopicNames
 
     d = TopicNames()
     g = parser.add_argument_group("bag topics")
@@ -15,7 +15,7 @@ def add_topic_options(parser) -> None:
 
 
 def topics_from_args(args):
-    from clutch_model.formats.bag_reader import TopicNames
+    from clutch_model.formats.topics import TopicNames
 
     return TopicNames(args.topic_force, args.topic_slip, args.topic_sump, args.topic_torque, args.topic_pack)
 

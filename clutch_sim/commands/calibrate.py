@@ -27,7 +27,6 @@ def add_parser(sub):
 
 
 def run(args) -> int:
-    import json
     import sys
 
     import numpy as np
@@ -36,7 +35,7 @@ def run(args) -> int:
     from clutch_model.identification import parse_coefficients
     from clutch_model.identification.calibrate import calibrate_friction
     from clutch_model.identification.evaluate import CampaignInputs, rmse_of
-    from clutch_model.identification import jsonable
+    from clutch_model.formats.results import write_json
     from clutch_model.identification.friction_fit import sidecar_path
     from clutch_model.plant.params import load_model, save_model
     from clutch_model.formats.bag_reader import Campaign
@@ -74,7 +73,7 @@ def run(args) -> int:
         report["held_out"] = {"runs": list(args.hold_out), "rmse_before": before, "rmse_after": after}
     save_model(res.model, args.out, header="\n".join(lines))
     sc = sidecar_path(args.out)
-    sc.write_text(json.dumps(jsonable(report), indent=2, allow_nan=False))
+    write_json(sc, report)
     print("\n".join(lines))
     print(f"wrote {args.out} and {sc}")
     return 0

@@ -11,7 +11,7 @@ def add_parser(sub):
                                    "inequalities enforced over P in [0, 20] MPa x theta in [0, 230] C. Writes "
                                    "MODEL.yaml (the base model with the fitted coefficients; the fit summary in its "
                                    "header) and MODEL.fit.json (RMSE, standard errors, active constraints).")
-    p.add_argument("--bench", required=True, metavar="BENCH.csv", help="bench CSV (CONTRACT.md schema)")
+    p.add_argument("--bench", required=True, metavar="BENCH.csv", help="bench CSV (docs/bags.md, Bench data)")
     p.add_argument("--out", required=True, metavar="MODEL.yaml")
     add_params_option(p)
     p.add_argument("--mu-offset", type=float, default=None, metavar="X",

@@ -29,10 +29,8 @@ def add_parser(sub):
 
 
 def run(args) -> int:
-    import json
-
     from clutch_model.errors import ParamsError
-    from clutch_model.identification import jsonable
+    from clutch_model.formats.results import write_json
     from clutch_model.identification.friction_fit import sidecar_path
     from clutch_model.identification.thermal_fit import (fit_heat_transfer, fit_viscosity, read_viscosity_csv,
                                                          with_thermal)
@@ -60,7 +58,7 @@ def run(args) -> int:
         report["heat_transfer"] = h.to_json()
     save_model(model, args.out, header="fit-thermal\n" + "\n".join(lines))
     sc = sidecar_path(args.out)
-    sc.write_text(json.dumps(jsonable(report), indent=2, allow_nan=False))
+    write_json(sc, report)
     print("\n".join(lines))
     print(f"wrote {args.out} and {sc}")
     return 0

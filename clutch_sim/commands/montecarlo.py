@@ -69,5 +69,5 @@ def run(args) -> int:
     written = res.save(args.out, plots=not args.no_plots)
     print("\n".join(res.summary_lines()))
     print(f"wrote {len(written)} files to {args.out} (samples.npz, refined_model.yaml, summary.json"
-          f"{', scatter_*.png' if not args.no_plots else ''})")
+          f"{', scatter.png' if not args.no_plots else ''})")
     return 0

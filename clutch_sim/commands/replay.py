@@ -5,7 +5,7 @@ import math
 import sys
 
 from clutch_sim.cli import add_params_option
-from clutch_sim.commands._common import add_topic_options, load_runs
+from clutch_sim.commands._common import add_topic_options
 
 
 def add_parser(sub):
@@ -23,15 +23,15 @@ def add_parser(sub):
 
 def run(args) -> int:
     from clutch_model.plant.params import load_model
-    from clutch_model.replay import replay_runs, write_replay_csv
+    from clutch_model.replay_stream import replay_bags
+
+    from clutch_sim.commands._common import topics_from_args
 
     model = load_model(args.params)
-    runs = load_runs(args, args.bags)
-    result = replay_runs(model, runs)
-    write_replay_csv(result, args.out)
-    total = sum(len(r) for r in runs)
-    print(f"replayed {len(runs)} bag(s), {total} rows -> {args.out}")
-    for name, rmse_t, rmse_th, n in result.per_run():
+    # bag by bag (memory bounded by the largest bag), the same numbers as the whole campaign at once
+    result = replay_bags(model, args.bags, args.out, topics_from_args(args), progress=True)
+    print(f"replayed {len(result.per_run)} bag(s), {result.rows} rows -> {args.out}")
+    for name, rmse_t, rmse_th, n in result.per_run:
         extra = f", pack temperature RMSE {rmse_th:.2f} C" if not math.isnan(rmse_th) else ""
         print(f"  {name}: {n} rows, torque RMSE {rmse_t:.2f} N*m{extra}")
     rmse = result.rmse_torque()

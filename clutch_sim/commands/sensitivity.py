@@ -49,10 +49,10 @@ def run(args) -> int:
     sc = ThesisScenario(duration_s=args.duration, rate_hz=args.rate)
     fs = friction_sensitivity(model, sc)
     _write_csv(out / "torque_response.csv", ["t", "torque_nominal", "torque_mu_plus", "torque_mu_minus", "mu_f"],
-               ((f"{a:.6g}", repr(b), repr(c), repr(d), repr(e)) for a, b, c, d, e in
+               ((f"{a:.6g}", repr(float(b)), repr(float(c)), repr(float(d)), repr(float(e))) for a, b, c, d, e in
                 zip(fs.t, fs.torque_nominal, fs.torque_plus, fs.torque_minus, fs.mu_f)))
     _write_csv(out / "finite_difference.csv", ["t", "dT_dmu_f", "normalized"],
-               ((f"{a:.6g}", repr(b), repr(c)) for a, b, c in zip(fs.t, fs.sensitivity, fs.normalized)))
+               ((f"{a:.6g}", repr(float(b)), repr(float(c))) for a, b, c in zip(fs.t, fs.sensitivity, fs.normalized)))
     plots.sensitivity_figures(fs, out)
     s_abs, s_norm = fs.steady_mean()
     print(f"mu_f sensitivity (eq. 3.20) at steady state (t >= {fs.steady_from_s:.2f} s): dT/dmu_f = "

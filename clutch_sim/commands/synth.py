@@ -59,6 +59,8 @@ def add_parser(subparsers) -> None:
     p.add_argument("--compression", choices=("none", "lz4"), default="none",
                    help="MCAP chunk compression (default none)")
     add_params_option(p)
+    from clutch_sim.commands._car_logs import add_car_logs_options
+    add_car_logs_options(p)
     p.set_defaults(func=run)
 
 
@@ -70,6 +72,9 @@ def run(args) -> int:
     from clutch_model.virtual_car.campaign import (CampaignSpec, check_output_dir, run_names,
                                     synthesize_campaign, write_campaign)
 
+    if getattr(args, "conditions", "lab") == "car-logs":
+        from clutch_sim.commands._car_logs import run_car_logs
+        return run_car_logs(args)
     if args.magnitude is not None and not (args.mechanism or args.extra_effect):
         raise ParamsError("--magnitude needs --mechanism or --extra-effect")
     if args.compression != "none" and args.storage != "mcap":

@@ -2,7 +2,8 @@
 import numpy as np
 import pytest
 
-from clutch_model import load_model
+from clutch_model import load_model, predict_measured_torque, simulate
+from clutch_model.formats.bag_reader import Campaign
 from clutch_model.virtual_car import identification_data as td
 
 NOISE_NM = 15.0
@@ -32,14 +33,45 @@ def bench_rc1(rc1):
     return td.synthetic_bench(rc1, noise=0.002, seed=3)
 
 
-def grid_friction_min(a, i, p=(0, 6), th=(0, 230), w=(0, 30)):
-    """Independent dense-grid evaluation of the raw Stribeck law (no code shared with box)."""
+def stribeck_mu(a, i, P, T, W, pinned=True):
+    """The Stribeck friction law written out independently of the package:
+    mu = g0 + (g1 - g0) exp(-(|w| / ws)^i) + g3 |w|, each g a quadratic in P (MPa) and T (C).
+    ``pinned``: as the plant evaluates it (docs/model.md): P clamped to [0, 20] MPa, T to
+    [0, 230] C, mu floored at 0; without it, the raw law (for positivity checks)."""
     a = np.asarray(a, float)
-    P, T, W = np.meshgrid(np.linspace(*p, 31), np.linspace(*th, 47),
-                          np.concatenate([np.linspace(*w, 61), np.geomspace(1e-4, w[1], 60)]), indexing="ij")
+    P, T, W = (np.asarray(x, float) for x in (P, T, W))
+    if pinned:
+        P, T = np.clip(P, 0.0, 20.0), np.clip(T, 0.0, 230.0)
 
     def poly(k):
         return a[k] + a[k + 1] * P + a[k + 2] * P ** 2 + a[k + 3] * T + a[k + 4] * T ** 2
 
     ws = np.maximum(poly(10), 1e-6)
-    return float((poly(0) + (poly(5) - poly(0)) * np.exp(-(W / ws) ** i) + poly(15) * W).min())
+    mu = poly(0) + (poly(5) - poly(0)) * np.exp(-(np.abs(W) / ws) ** i) + poly(15) * np.abs(W)
+    return np.maximum(mu, 0.0) if pinned else mu
+
+
+def grid_friction_min(a, i, p=(0, 6), th=(0, 230), w=(0, 30)):
+    """Independent dense-grid evaluation of the raw Stribeck law (no code shared with box)."""
+    P, T, W = np.meshgrid(np.linspace(*p, 31), np.linspace(*th, 47),
+                          np.concatenate([np.linspace(*w, 61), np.geomspace(1e-4, w[1], 60)]), indexing="ij")
+    return float(stribeck_mu(a, i, P, T, W, pinned=False).min())
+
+
+def noise_free_rmse(model, truth, runs):
+    """RMSE between the model's and the truth's plant torque on the runs' inputs (no noise)."""
+    camp = Campaign(list(runs))
+
+    def torque(m):
+        return simulate(m, camp.t, camp.force, camp.slip, camp.sump, run_start=camp.run_start).torque_nm
+
+    return float(np.sqrt(np.mean((torque(model) - torque(truth)) ** 2)))
+
+
+def measured_rmse(model, runs):
+    """RMSE of the model's predicted sensor torque against the runs' measured torque, computed
+    from the public simulator (not the identification code path)."""
+    camp = Campaign(list(runs))
+    sim = simulate(model, camp.t, camp.force, camp.slip, camp.sump, run_start=camp.run_start)
+    pred = predict_measured_torque(model, camp.t, sim.torque_nm, camp.run_start)
+    return float(np.sqrt(np.mean((pred - camp.torque_measured) ** 2)))

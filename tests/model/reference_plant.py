@@ -1,5 +1,5 @@
 """An independent plain-numpy/scipy transcription of the thesis' plant (eq. 3.1-3.18, 4.9-4.14
-and the CONTRACT pins), integrated with solve_ivp(Radau) as the tests' reference. It shares
+and the pins of docs/model.md), integrated with solve_ivp(Radau) as the tests' reference. It shares
 no code with clutch_model.plant.kernels on purpose."""
 from __future__ import annotations
 

@@ -1,7 +1,7 @@
 """The baseline plant against independent expectations: closed forms vs quadrature, the
 asperity equilibrium vs a root solve, the simulators vs solve_ivp(Radau, rtol=1e-8) on an
 independent transcription of the thesis, the thermal energy balance, and the pins of
-CONTRACT.md (force clamp, lock-up, friction box)."""
+docs/model.md (force clamp, lock-up, friction box)."""
 import math
 
 import numpy as np
@@ -36,7 +36,7 @@ def test_fe_closed_form_matches_quadrature(x):
 
 
 def test_reference_constants_of_contract():
-    # P_a(0) = 5.96 MPa and the force limit 0.9 * A_N * P_a(0) = 43.8 kN (CONTRACT.md)
+    # P_a(0) = 5.96 MPa and the force limit 0.9 * A_N * P_a(0) = 43.8 kN (docs/model.md)
     d = K.derived_constants(MODEL.vector())
     assert d[K.D_KP] * K.greenwood_williamson_fe(0.0) == pytest.approx(5.96e6, rel=2e-3)
     assert MODEL.max_pack_force_n == pytest.approx(43.8e3, rel=2e-3)

@@ -102,6 +102,7 @@ def test_rclpy_cdr_decodes_with_typestore_and_mcap_roundtrip(tmp_path):
     from clutch_msgs.msg import ClutchState
     from rclpy.serialization import serialize_message
 
+    from clutch_model.errors import DataError
     from clutch_model.formats.typestore import typestore
     from clutch_sim_ros.record import McapOut
 
@@ -132,8 +133,21 @@ def test_rclpy_cdr_decodes_with_typestore_and_mcap_roundtrip(tmp_path):
         (schema, channel, message, ros_msg), = list(make_reader(fh, decoder_factories=[DecoderFactory()])
                                                     .iter_decoded_messages())
     assert schema.name == "clutch_msgs/msg/ClutchState" and ros_msg.energy == 12.5
-    with pytest.raises(Exception):
-        McapOut(out)          # never overwritten unless asked
+    assert ros_msg.clutch_torque == -456.75 and ros_msg.locked is True and ros_msg.header.stamp.sec == 17
+
+    # never overwritten unless asked: a clear DataError, the recording untouched, no temp left
+    before = out.read_bytes()
+    with pytest.raises(DataError, match="exists already"):
+        McapOut(out)
+    assert out.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["rec.mcap"]
+    # asked: replaced by the new recording, which reads back with its own message only
+    bag = McapOut(out, overwrite=True)
+    conn = bag.writer.add_connection("/clutch/clutch_state", "clutch_msgs/msg/ClutchState", typestore=typestore())
+    bag.writer.write(conn, 99_000_000_000, data)
+    bag.close()
+    with AnyReader([out]) as reader:
+        assert [t for _, t, _ in reader.messages()] == [99_000_000_000]
 
 
 def test_bag_reading_for_play(tmp_path):

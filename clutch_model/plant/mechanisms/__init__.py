@@ -13,6 +13,7 @@ from clutch_model.plant.mechanisms.actuator_hysteresis import ActuatorHysteresis
 from clutch_model.plant.mechanisms.actuator_lag import ActuatorLag
 from clutch_model.plant.mechanisms.base import (PATHS, CampaignScale, Mechanism, Parameter, ParamSpec,
                                                 VirtualCarRange)
+from clutch_model.plant.mechanisms.discovered import Discovered
 from clutch_model.plant.mechanisms.drag_torque import DragTorque
 from clutch_model.plant.mechanisms.friction_degradation import FrictionDegradation
 from clutch_model.plant.mechanisms.spring_preload import SpringPreload
@@ -24,17 +25,20 @@ from clutch_model.plant.mechanisms.transport_delay import TransportDelay, delay_
 CATALOG = {cls.id: cls for cls in (ActuatorLag, ActuatorHysteresis, SpringPreload, FrictionDegradation,
                                    TorqueOffset, TransportDelay, DragTorque, TorqueSensorLag)}
 CATALOG_ORDER = {mid: k for k, mid in enumerate(CATALOG)}
+# beyond the catalog: extensions a model file may carry (found from data), applied after it
+EXTENSIONS = {Discovered.id: Discovered}
 DIAGNOSIS_CANDIDATES = [mid for mid, cls in CATALOG.items() if cls.diagnosis_candidate]
 
-__all__ = ["CATALOG", "CATALOG_ORDER", "DIAGNOSIS_CANDIDATES", "PATHS", "CampaignScale", "Mechanism",
+__all__ = ["CATALOG", "CATALOG_ORDER", "DIAGNOSIS_CANDIDATES", "EXTENSIONS", "Discovered", "PATHS", "CampaignScale", "Mechanism",
            "Parameter", "ParamSpec", "VirtualCarRange", "apply_measurement", "delay_signal",
            "lowpass_signal", "make_mechanism", "mechanism_from_dict", "ordered"]
 
 
 def make_mechanism(mech_id: str, **values) -> Mechanism:
-    if mech_id not in CATALOG:
-        raise ParamsError(f"unknown mechanism id '{mech_id}' (known: {', '.join(CATALOG)})")
-    return CATALOG[mech_id](dict(values))
+    cls = CATALOG.get(mech_id) or EXTENSIONS.get(mech_id)
+    if cls is None:
+        raise ParamsError(f"unknown mechanism id '{mech_id}' (known: {', '.join([*CATALOG, *EXTENSIONS])})")
+    return cls(dict(values))
 
 
 def mechanism_from_dict(raw, source="<memory>") -> Mechanism:
@@ -49,7 +53,7 @@ def mechanism_from_dict(raw, source="<memory>") -> Mechanism:
 
 def ordered(mechanisms) -> list:
     """Mechanisms in catalog order (the order in which same-path mechanisms compose)."""
-    return sorted(mechanisms, key=lambda m: CATALOG_ORDER[m.id])
+    return sorted(mechanisms, key=lambda m: CATALOG_ORDER.get(m.id, len(CATALOG_ORDER)))
 
 
 def apply_measurement(mechanisms, t, torque, run_start):

@@ -1,0 +1,145 @@
+"""Lock-up phases found from the data, robust to a noisy slip signal.
+
+While the clutch is locked the measured slip is sensor noise around 0 (its std is unknown
+and the noise may be coloured), and the transmitted torque is set by the driveline, so
+locked samples must be kept out of calibration and diagnosis residuals.
+
+Method (``detect_lockup``):
+1. smooth the signed slip with a centred moving average over ``smooth_s``;
+2. estimate the slip sensor's noise from the data: start from the white-noise estimate of
+   first differences (1.4826·MAD(Δslip)/√2), then iterate: candidate lock segments are those
+   where the smoothed |slip| stays below ``k_enter``·σ for at least ``min_dwell_s``, and σ
+   becomes the robust std (1.4826·MAD) of the *raw* slip inside them — so coloured noise
+   (AR(1) φ → 1, where differences see only a fraction of the std) still gets its full std
+   after a few rounds. σ is capped so the thresholds stay below ``max_threshold_rad_s``;
+3. hysteresis: a lock phase is a connected span with smoothed |slip| < ``k_exit``·σ that
+   contains a sample below ``k_enter``·σ, trimmed at both ends to its first and last sample
+   below ``k_enter``·σ (the exit threshold bridges noise excursions inside a lock; the edges
+   sit at the enter threshold), lasting at least ``min_dwell_s`` (so brief zero crossings of
+   a slipping clutch are not locks). Thresholds never go below the model's
+   lock tolerance ``lock_slip_rad_s``.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.ndimage import uniform_filter1d
+
+MAD_TO_SIGMA = 1.4826
+
+
+@dataclass
+class LockupResult:
+    mask: np.ndarray          # locked at each input sample
+    segments: list            # [(t_start_s, t_end_s), ...] of the lock phases
+    noise_sigma_rad_s: float  # the slip sensor noise std estimated from the data
+    threshold_enter_rad_s: float
+    threshold_exit_rad_s: float
+
+    def at(self, t_query, pad_s: float = 0.0) -> np.ndarray:
+        """Boolean mask at other times (grid rows, torque stamps): inside a lock phase,
+        widened by ``pad_s`` on both sides."""
+        t_query = np.asarray(t_query, float)
+        out = np.zeros(t_query.size, bool)
+        for a, b in self.segments:
+            out |= (t_query >= a - pad_s) & (t_query <= b + pad_s)
+        return out
+
+    @property
+    def locked_time_s(self) -> float:
+        return float(sum(b - a for a, b in self.segments))
+
+
+def _spans(mask):
+    """(start, end_exclusive) index pairs of the True runs of a boolean array."""
+    d = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
+    return list(zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1)))
+
+
+def _hysteresis(t, a, t_in, t_out, min_dwell_s):
+    mask = np.zeros(a.size, bool)
+    segs = []
+    for i0, i1 in _spans(a < t_out):
+        core = np.flatnonzero(a[i0:i1] < t_in)
+        if core.size == 0:
+            continue
+        i0, i1 = i0 + int(core[0]), i0 + int(core[-1]) + 1   # edges at the enter threshold
+        if t[i1 - 1] - t[i0] < min_dwell_s:
+            continue
+        mask[i0:i1] = True
+        segs.append((float(t[i0]), float(t[i1 - 1])))
+    return mask, segs
+
+
+def detect_lockup(t_s, slip_rad_s, smooth_s: float = 0.05, min_dwell_s: float = 0.25,
+                  k_enter: float = 3.0, k_exit: float = 4.5, lock_slip_rad_s: float = 1e-3,
+                  max_threshold_rad_s: float = 0.5, max_rounds: int = 12) -> LockupResult:
+    """Lock phases of one run from its slip samples (own times, s). See the module docstring."""
+    t = np.asarray(t_s, float)
+    w = np.asarray(slip_rad_s, float)
+    ok = np.isfinite(t) & np.isfinite(w)
+    t, w = t[ok], w[ok]
+    if t.size < 3:
+        return LockupResult(np.zeros(t.size, bool), [], float("nan"), lock_slip_rad_s, lock_slip_rad_s)
+    rate = (t.size - 1) / max(t[-1] - t[0], 1e-9)
+    m = max(1, int(round(smooth_s * rate)))
+    a = np.abs(uniform_filter1d(w, m, mode="nearest"))
+    sigma = MAD_TO_SIGMA * float(np.median(np.abs(np.diff(w) - np.median(np.diff(w))))) / np.sqrt(2.0)
+    sigma_cap = max_threshold_rad_s / k_exit
+    sigma = min(max(sigma, 1e-12), sigma_cap)
+    for _ in range(max_rounds):
+        t_in = max(k_enter * sigma, lock_slip_rad_s)
+        t_out = max(k_exit * sigma, t_in)
+        mask, _ = _hysteresis(t, a, t_in, t_out, min_dwell_s)
+        if mask.sum() < 10:
+            break
+        x = w[mask]
+        new = min(MAD_TO_SIGMA * float(np.median(np.abs(x - np.median(x)))), sigma_cap)
+        if abs(new - sigma) <= 0.02 * sigma:
+            sigma = max(new, sigma)
+            break
+        sigma = max(new, 1e-12)
+    t_in = max(k_enter * sigma, lock_slip_rad_s)
+    t_out = max(k_exit * sigma, t_in)
+    mask, segs = _hysteresis(t, a, t_in, t_out, min_dwell_s)
+    full = np.zeros(ok.size, bool)
+    full[np.flatnonzero(ok)] = mask
+    return LockupResult(full, segs, float(sigma), float(t_in), float(t_out))
+
+
+def detect_lockup_run(run, **options) -> LockupResult:
+    """``detect_lockup`` on a bag_reader.Run's own slip samples (``run.slip_raw_t``);
+    use ``.at(run.t)`` for its grid rows and ``.at(run.torque_measured_t)`` for the torque
+    samples."""
+    return detect_lockup(run.slip_raw_t, run.slip_raw_rad_s, **options)
+
+
+def campaign_lockup(campaign, **options) -> list:
+    """``LockupResult`` per run of a bag_reader.Campaign (campaign order), from each run's own
+    slip samples when it has them, else from its grid slip."""
+    out = []
+    for run in campaign.runs:
+        if "slip_speed" in getattr(run, "samples", {}):
+            out.append(detect_lockup_run(run, **options))
+        else:
+            out.append(detect_lockup(run.t, run.slip_speed_rad_s, **options))
+    return out
+
+
+def without_locked_torque(campaign, pad_s: float = 0.1, **options):
+    """(campaign with the measured torque set to NaN on grid rows inside a lock phase (widened
+    by ``pad_s``), [LockupResult per run]). While locked the driveline sets the torque, so
+    those rows say nothing about the clutch model; NaN keeps them out of every residual."""
+    from dataclasses import replace
+
+    from clutch_model.formats.bag_reader import Campaign
+
+    results = campaign_lockup(campaign, **options)
+    runs = []
+    for run, res in zip(campaign.runs, results):
+        if run.torque_measured_nm is not None and res.segments:
+            tq = np.where(res.at(run.t, pad_s), np.nan, run.torque_measured_nm)
+            run = replace(run, torque_measured_nm=tq)
+        runs.append(run)
+    return Campaign(runs), results

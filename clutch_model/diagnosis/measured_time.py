@@ -1,0 +1,268 @@
+"""Compare where the measurement is: a model evaluated at the measured torque's own stamps.
+
+Two ways, both keeping the replay CSV of the contract as it is:
+
+``simulate_at_measured_times`` (use this for calibration and diagnosis residuals) simulates
+each run on a fine grid (``rate_hz``, 1 kHz by default) joined with the torque stamps, every
+input linearly interpolated between its own samples (first-order hold), so the model's output
+sits exactly at each torque sample's log time. A zero-order hold of the inputs (the replay
+grid) lags the true inputs by half a sample period on average: force at 200 Hz held makes
+the model ~2.5 ms late (on the car-log virtual car: best-aligned lag −2.5 to −4 ms with the
+hold, −0.5 to 0 ms with the linear one), which a diagnosis would read as a transport delay.
+
+``at_measured_times`` evaluates a per-row signal of the replay grid at the torque stamps:
+
+The replay grid has one row per applied-force message and holds the latest
+torque sample at each row; a torque logged at 50 Hz against a 200 Hz force grid is then up to
+20 ms stale, which looks like a transport delay. Here the model's per-row signal (the plant
+torque, or the predicted measurement) is evaluated at each torque sample's own log time by
+linear interpolation between the two grid rows around it. Between rows the plant evolves
+with the inputs held, so linear interpolation is exact up to the curvature over one row
+interval (5 ms at 200 Hz) and smooths a step at an input sample over one interval — fine
+where the force grid is dense relative to the torque rate, as on car logs (100-1000 Hz force,
+10-200 Hz torque). Torque samples before a run's first grid row or after its last get NaN
+(``valid`` False): the model has no state there.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+def interpolate_on_grid(t_grid, y_grid, t_query) -> np.ndarray:
+    """Linear interpolation of a per-row signal at query times; NaN outside the grid."""
+    t_grid = np.asarray(t_grid, float)
+    y_grid = np.asarray(y_grid, float)
+    t_query = np.asarray(t_query, float)
+    out = np.interp(t_query, t_grid, y_grid)
+    out[(t_query < t_grid[0]) | (t_query > t_grid[-1])] = np.nan
+    return out
+
+
+@dataclass
+class MeasuredComparison:
+    """Model and measurement at the measured torque's stamps, runs concatenated."""
+
+    names: list               # run names, in campaign order
+    run_index: np.ndarray     # run of each sample
+    t: np.ndarray             # stamp, s from the run's bag start
+    model: np.ndarray         # the model signal evaluated there (NaN where invalid)
+    measured: np.ndarray
+    valid: np.ndarray         # inside the run's grid and finite
+
+    @property
+    def residual(self) -> np.ndarray:
+        return self.measured - self.model
+
+    def rmse(self, mask=None) -> float:
+        ok = self.valid if mask is None else (self.valid & mask)
+        return float(np.sqrt(np.mean(self.residual[ok] ** 2))) if ok.any() else float("nan")
+
+    def run_slice(self, j: int) -> slice:
+        idx = np.flatnonzero(self.run_index == j)
+        return slice(int(idx[0]), int(idx[-1]) + 1) if idx.size else slice(0, 0)
+
+
+def at_measured_times(campaign, y_grid) -> MeasuredComparison:
+    """Evaluate a per-row signal of a bag_reader.Campaign (e.g. ReplayResult.torque_sim)
+    at every run's measured-torque stamps (``Run.torque_measured_t``). Runs without a
+    measured torque contribute nothing."""
+    y_grid = np.asarray(y_grid, float)
+    parts = {"i": [], "t": [], "m": [], "y": []}
+    for j, (run, sl) in enumerate(campaign.slices()):
+        tq = run.torque_measured_t
+        if tq is None or tq.size == 0:
+            continue
+        parts["i"].append(np.full(tq.size, j))
+        parts["t"].append(tq)
+        parts["m"].append(interpolate_on_grid(run.t, y_grid[sl], tq))
+        parts["y"].append(run.torque_measured_raw_nm)
+    if not parts["t"]:
+        z = np.zeros(0)
+        return MeasuredComparison(campaign.names, z.astype(int), z, z, z, z.astype(bool))
+    cat = np.concatenate
+    model, meas = cat(parts["m"]), cat(parts["y"])
+    return MeasuredComparison(campaign.names, cat(parts["i"]), cat(parts["t"]), model, meas,
+                              np.isfinite(model) & np.isfinite(meas))
+
+
+def replay_at_measured_times(model, runs, energy0_j=None):
+    """replay_runs(model, runs) evaluated at the measured torque's stamps:
+    (ReplayResult, MeasuredComparison of the predicted measured torque)."""
+    from clutch_model.replay import replay_runs
+
+    result = replay_runs(model, runs, energy0_j=energy0_j)
+    return result, at_measured_times(result.campaign, result.torque_sim)
+
+
+def _run_grid(run, rate_hz):
+    tq = run.torque_measured_t
+    t0 = float(run.t[0])
+    t_end = float(run.t[-1])
+    if tq is not None and tq.size:
+        t_end = max(t_end, float(tq[-1]))
+    fine = t0 + np.arange(int(np.floor((t_end - t0) * rate_hz)) + 1) / rate_hz
+    stamps = tq[(tq >= t0) & (tq <= t_end)] if tq is not None else np.zeros(0)
+    if stamps.size:
+        # fine points within 0.2 periods of a stamp are dropped (no near-duplicate rows)
+        pos = np.clip(np.searchsorted(stamps, fine), 1, stamps.size - 1) if stamps.size > 1 else np.zeros(fine.size, int)
+        near = np.minimum(np.abs(fine - stamps[pos]), np.abs(fine - stamps[np.maximum(pos - 1, 0)]))
+        fine = fine[near > 0.2 / rate_hz]
+    return np.union1d(fine, stamps)
+
+
+@dataclass
+class MeasuredTimeGrid:
+    """A campaign's simulation grid for comparing where the measurement is: per run a
+    ``rate_hz`` grid from the run's first replay row joined with its torque stamps, inputs
+    linearly interpolated between their own samples (held after the last one); runs
+    concatenated in log-time order. Feed ``t, force, slip, sump, run_start`` to
+    ``simulate`` / ``simulate_batch``; ``torque_rows`` picks the rows of the torque samples."""
+
+    names: list
+    t: np.ndarray
+    force: np.ndarray
+    slip: np.ndarray
+    sump: np.ndarray
+    run_start: np.ndarray
+    run_index: np.ndarray        # run of each grid row
+    torque_run: np.ndarray       # run of each torque sample
+    torque_t: np.ndarray         # stamp of each torque sample, s from its bag start
+    torque_measured: np.ndarray  # the measured torque samples
+    torque_rows: np.ndarray      # grid row of each torque sample (-1: before the run's first row)
+    start_time_ns: int = 0       # the first run's start (for the model's energy history)
+
+    def at_torque_stamps(self, values) -> np.ndarray:
+        """A per-grid-row signal (1-D, or (n_sets, n_rows)) at the torque samples; NaN (or
+        False for booleans) where a torque sample has no row."""
+        values = np.asarray(values)
+        ok = self.torque_rows >= 0
+        rows = np.maximum(self.torque_rows, 0)
+        picked = values[..., rows]
+        if values.dtype == bool:
+            return picked & ok
+        return np.where(ok, picked, np.nan)
+
+    def comparison(self, y_grid) -> MeasuredComparison:
+        model = self.at_torque_stamps(np.asarray(y_grid, float))
+        return MeasuredComparison(self.names, self.torque_run, self.torque_t, model, self.torque_measured,
+                                  np.isfinite(model) & np.isfinite(self.torque_measured))
+
+
+def measured_time_grid(runs, rate_hz: float = 1000.0) -> MeasuredTimeGrid:
+    """Build the measured-time grid of runs (a Campaign or a list of Run as read by
+    bag_reader, which keep every topic's own samples)."""
+    from clutch_model.formats.bag_reader import Campaign
+
+    campaign = runs if isinstance(runs, Campaign) else Campaign(list(runs))
+    grids, inputs = [], {"applied_force": [], "slip_speed": [], "sump_temperature": []}
+    tr, tt, tm, rows = [], [], [], []
+    off = 0
+    for j, run in enumerate(campaign.runs):
+        g = _run_grid(run, rate_hz)
+        grids.append(g)
+        for ch in inputs:
+            ts, vs = run.samples[ch]
+            inputs[ch].append(np.interp(g, ts, vs))
+        tq = run.torque_measured_t
+        if tq is not None and tq.size:
+            pos = np.minimum(np.searchsorted(g, tq), g.size - 1)
+            hit = np.abs(g[pos] - tq) < 1e-12
+            tr.append(np.full(tq.size, j)); tt.append(tq); tm.append(run.torque_measured_raw_nm)
+            rows.append(np.where(hit, off + pos, -1))
+        off += g.size
+    sizes = [g.size for g in grids]
+    run_start = np.zeros(off, bool)
+    run_start[np.cumsum([0] + sizes[:-1])] = True
+    cat = (lambda xs, dt=float: np.concatenate(xs) if xs else np.zeros(0, dt))
+    return MeasuredTimeGrid(
+        names=campaign.names, t=np.concatenate(grids), force=np.concatenate(inputs["applied_force"]),
+        slip=np.concatenate(inputs["slip_speed"]), sump=np.concatenate(inputs["sump_temperature"]),
+        run_start=run_start, run_index=np.repeat(np.arange(len(grids)), sizes),
+        torque_run=cat(tr, int), torque_t=cat(tt), torque_measured=cat(tm), torque_rows=cat(rows, int),
+        start_time_ns=int(campaign.runs[0].start_time_ns))
+
+
+@dataclass
+class MeasuredTimeSimulation:
+    """A model simulated on a MeasuredTimeGrid."""
+
+    grid: MeasuredTimeGrid
+    sim: object               # plant.simulate.SimResult on grid.t
+    torque_pred: np.ndarray   # predicted measured torque (measurement mechanisms applied)
+    comparison: MeasuredComparison   # at the torque stamps (exact grid rows)
+
+    @property
+    def t(self):
+        return self.grid.t
+
+    @property
+    def run_index(self):
+        return self.grid.run_index
+
+
+def simulate_at_measured_times(model, runs, rate_hz: float = 1000.0, energy0_j=None,
+                               grid: MeasuredTimeGrid | None = None) -> MeasuredTimeSimulation:
+    """Simulate runs on their measured-time grid (``measured_time_grid``; pass ``grid`` to
+    reuse one): runs in log-time order, the plant restarting at each run and the dissipated
+    energy carried (as replay), measurement mechanisms applied; the comparison with the
+    measured torque sits at the torque's own stamps."""
+    from clutch_model.plant.simulate import predict_measured_torque, simulate
+
+    g = grid if grid is not None else measured_time_grid(runs, rate_hz)
+    if energy0_j is None:
+        energy0_j = model.initial_energy_j(g.start_time_ns)
+    sim = simulate(model, g.t, g.force, g.slip, g.sump, run_start=g.run_start, energy0_j=energy0_j)
+    pred = np.asarray(predict_measured_torque(model, g.t, sim.torque_nm, g.run_start), float)
+    return MeasuredTimeSimulation(grid=g, sim=sim, torque_pred=pred, comparison=g.comparison(pred))
+
+
+def measured_time_campaign(runs, rate_hz: float | None = None):
+    """The campaign re-gridded for comparing where the measurement is, in the replay-grid
+    form every grid-based tool takes (bag_reader.Campaign): per run a grid at ``rate_hz``
+    (default: the run's mean applied-force rate) joined with its torque stamps, inputs
+    linearly interpolated between their own samples, ``torque_measured_nm`` the measured
+    sample at its own stamp and NaN on every other row (so residuals exist only where the
+    measurement is), pack temperature linearly interpolated. Names, start times and the raw
+    samples are kept."""
+    from dataclasses import replace
+
+    from clutch_model.formats.bag_reader import Campaign
+
+    campaign = runs if isinstance(runs, Campaign) else Campaign(list(runs))
+    out = []
+    for run in campaign.runs:
+        tf = run.samples["applied_force"][0]
+        rate = rate_hz or ((tf.size - 1) / max(float(tf[-1] - tf[0]), 1e-9) if tf.size > 1 else 200.0)
+        g = _run_grid(run, rate)
+        vals = {ch: np.interp(g, *run.samples[ch]) for ch in ("applied_force", "slip_speed", "sump_temperature")}
+        torque = None
+        tq = run.torque_measured_t
+        if tq is not None and tq.size:
+            torque = np.full(g.size, np.nan)
+            pos = np.minimum(np.searchsorted(g, tq), g.size - 1)
+            hit = np.abs(g[pos] - tq) < 1e-12
+            torque[pos[hit]] = run.torque_measured_raw_nm[hit]
+        pack = None
+        if "pack_temperature" in run.samples:
+            tp, vp = run.samples["pack_temperature"]
+            pack = np.interp(g, tp, vp, left=np.nan, right=np.nan)
+        out.append(replace(run, t=g, applied_force_n=vals["applied_force"], slip_speed_rad_s=vals["slip_speed"],
+                           sump_temperature_c=vals["sump_temperature"], torque_measured_nm=torque,
+                           pack_temperature_measured_c=pack))
+    return Campaign(out)
+
+
+def topics_unaligned(runs) -> bool:
+    """True when some run's measured-torque stamps are not all force stamps (the replay
+    grid would then hold each torque sample to later force rows)."""
+    for run in runs:
+        tq = run.torque_measured_t
+        if tq is None or not tq.size or "applied_force" not in run.samples:
+            continue
+        tf = run.samples["applied_force"][0]
+        pos = np.minimum(np.searchsorted(tf, tq), tf.size - 1)
+        if np.any(np.abs(tf[pos] - tq) > 1e-9):
+            return True
+    return False

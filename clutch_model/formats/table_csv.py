@@ -1,0 +1,89 @@
+"""Fast CSV of numeric columns: an hour of 1 kHz replay (3.6 million rows) in seconds.
+
+Python's ``repr`` of every float plus ``csv.writer`` per row costs ~10 µs a row; here blocks of
+rows are formatted by orjson (C, shortest round-trip float representation, so every value
+reads back bit for bit), rows split on its ``],[`` and prefixed with the row label. Blocks of
+``BLOCK_ROWS`` rows bound the memory. Non-finite values are written as empty fields (orjson's
+``null``). Without orjson, the same CSV (to the float's text: Python's repr) is written with
+the csv module. Lines end in CRLF, as ``csv.writer`` writes them.
+"""
+from __future__ import annotations
+
+import csv
+import io
+from pathlib import Path
+
+import numpy as np
+
+BLOCK_ROWS = 1 << 16
+EOL = "\r\n"
+
+
+def _label_prefix(label: str) -> str:
+    buf = io.StringIO()
+    csv.writer(buf, lineterminator="").writerow([label])
+    return buf.getvalue() + ","
+
+
+def _orjson():
+    try:
+        import orjson
+    except ImportError:
+        return None
+    return orjson
+
+
+def _block_orjson(orjson, prefix: bytes, cols: list, a: int, b: int) -> bytes:
+    """Rows a:b as CSV bytes (trailing EOL included)."""
+    floats = [c for c in cols if c.dtype.kind == "f"]
+    if len(floats) == len(cols):
+        block = np.column_stack([c[a:b] for c in cols])
+        body = orjson.dumps(block, option=orjson.OPT_SERIALIZE_NUMPY)[2:-2]
+        if not np.isfinite(block).all():
+            body = body.replace(b"null", b"")
+        body = body.replace(b"],[", EOL.encode() + prefix)
+        return prefix + body + EOL.encode()
+    # mixed kinds (integer flags): each column formatted alone, rows joined
+    parts = []
+    for c in cols:
+        c = np.ascontiguousarray(c[a:b])
+        if c.dtype.kind == "f":
+            text = orjson.dumps(c, option=orjson.OPT_SERIALIZE_NUMPY)[1:-1].replace(b"null", b"")
+        else:
+            text = orjson.dumps(c.astype(np.int64), option=orjson.OPT_SERIALIZE_NUMPY)[1:-1]
+        parts.append(text.split(b","))
+    eol = EOL.encode()
+    return b"".join(prefix + b",".join(row) + eol for row in zip(*parts))
+
+
+def _block_python(prefix: str, cols: list, a: int, b: int) -> str:
+    def fmt(c):
+        if c.dtype.kind == "f":
+            return ["" if not np.isfinite(x) else repr(x) for x in c[a:b].tolist()]
+        return [str(x) for x in c[a:b].astype(np.int64).tolist()]
+    return "".join(prefix + ",".join(row) + EOL for row in zip(*map(fmt, cols)))
+
+
+def write_table_csv(path, header: list, blocks) -> Path:
+    """Write ``header`` then, for every ``(label, columns)`` in ``blocks``, one row per sample:
+    the label, then the columns' values (1-D arrays of equal length; float columns: non-finite
+    -> empty field; integer/bool columns as integers)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    orjson = _orjson()
+    with path.open("wb") as fh:
+        fh.write((",".join(header) + EOL).encode())
+        for label, cols in blocks:
+            cols = [np.asarray(c) if np.asarray(c).dtype.kind in "iub" else np.asarray(c, dtype=np.float64)
+                    for c in cols]
+            n = len(cols[0]) if cols else 0
+            prefix = _label_prefix(label)
+            for a in range(0, n, BLOCK_ROWS):
+                b = min(a + BLOCK_ROWS, n)
+                if orjson is not None:
+                    fh.write(_block_orjson(orjson, prefix.encode(), cols, a, b))
+                else:
+                    fh.write(_block_python(prefix, cols, a, b).encode())
+            fh.flush()
+            del cols                                # free this block's arrays before the next is made
+    return path

@@ -1,0 +1,223 @@
+"""The car-log virtual test car: every condition is really in the written bags, the truth
+sidecar is consistent with the project's plant, same seed -> same files."""
+import glob
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy import signal as sps
+
+from clutch_model.plant.params import load_model
+from clutch_model.plant.simulate import simulate
+from clutch_model.virtual_car.car_logs import load_truth_sidecar
+from clutch_model.virtual_car.signals import TopicClock
+from tests.virtual_car.conftest import make_campaign
+
+
+def sidecar(paths, name):
+    return load_truth_sidecar(Path(paths["truth"]).parent / "truth" / f"{name}.npz")
+
+
+def test_topics_on_their_own_clocks(short_campaign):
+    result, paths, runs = short_campaign
+    clocks = result.spec.clocks
+    truth = json.loads(Path(paths["truth"]).read_text())
+    for run, meta in zip(runs, truth["runs"]):
+        for ch, (t, _v) in run.samples.items():
+            clock = clocks[ch]
+            dt = np.diff(t)
+            assert np.median(dt) == pytest.approx(1.0 / clock.rate_hz, rel=0.02), ch
+            # jitter: stamps against the nominal grid (phase fitted) are uniform +-jitter
+            k = np.round((t - t[0]) * clock.rate_hz)
+            dev = (t - t[0]) - k / clock.rate_hz
+            dev -= np.mean(dev)
+            bound = clock.jitter_s * 2 + clock.quantum_s
+            assert np.max(np.abs(dev)) <= bound + 1e-9, ch
+            if t.size > 200 and clock.jitter_s > 0:
+                assert np.std(dev) == pytest.approx(np.sqrt(clock.jitter_s ** 2 / 3 + clock.quantum_s ** 2 / 12),
+                                                    rel=0.15), ch
+        # the topics are not aligned: force, slip and torque stamps mostly differ
+        tf, ts, tq = run.samples["applied_force"][0], run.samples["slip_speed"][0], run.samples["measured_torque"][0]
+        assert np.mean(np.isin(np.round(tq, 6), np.round(tf, 6))) < 0.2
+        assert np.mean(np.isin(np.round(ts, 6), np.round(tf, 6))) < 0.2
+        # quantised stamps: log times are whole multiples of the quantum from the run start
+        side = sidecar(paths, run.name)
+        rel = side["torque_log_time_ns"] - meta["start_time_ns"]
+        assert np.all(rel % int(round(clocks["measured_torque"].quantum_s * 1e9)) == 0)
+        np.testing.assert_allclose(run.torque_measured_t, side["torque_t_s"], atol=1e-9)
+
+
+def test_truth_sidecar_consistent(short_campaign):
+    result, paths, runs = short_campaign
+    model = load_model(paths["truth_model"])
+    for run in runs:
+        side = sidecar(paths, run.name)
+        # measured = noise-free reading + noise, at the same stamps
+        np.testing.assert_allclose(run.torque_measured_raw_nm, side["torque_true_nm"] + side["torque_noise_nm"],
+                                   atol=1e-9)
+        # the fine grid is the project's plant: re-simulate the true inputs independently
+        sim = simulate(model, side["fine_t_s"], side["fine_applied_force_n"], side["fine_slip_speed_rad_s"],
+                       side["fine_sump_temperature_c"])
+        slipping = ~side["fine_plant_locked"]
+        np.testing.assert_allclose(sim.torque_nm[slipping], side["fine_torque_nm"][slipping], rtol=1e-9, atol=1e-9)
+        np.testing.assert_array_equal(sim.locked, side["fine_plant_locked"])
+
+
+def test_lock_phases_driveline_torque_and_slip_noise(short_campaign):
+    result, paths, runs = short_campaign
+    sigma = result.spec.noise["slip_speed"].sigma
+    n_locked = 0
+    for run in runs:
+        side = sidecar(paths, run.name)
+        lk = side["fine_locked"]
+        assert lk.any(), "every 10 s run has a lock phase"
+        cap = side["fine_static_capacity_nm"][lk]
+        tq = side["fine_torque_nm"][lk]
+        ratio = tq / cap
+        # the driveline sets the torque: below the static capacity, not equal to it
+        assert np.all(ratio >= 0.2 - 1e-9) and np.all(ratio <= 0.8 + 1e-9)
+        assert np.std(ratio) > 0.01
+        # the measured slip while locked is sensor noise around 0
+        w = run.slip_raw_rad_s[side["slip_locked"]]
+        n_locked += w.size
+        assert abs(np.mean(w)) < 4 * sigma / np.sqrt(w.size)
+        assert np.std(w) == pytest.approx(sigma, rel=0.2)
+        assert np.mean(np.abs(w) > 1e-3) > 0.9   # the model's tolerance sees it as slipping
+    assert n_locked > 200
+
+
+NOISE_CASES = {
+    "ar1": "ar1", "lowpass": "lowpass", "held": "held", "median": "median", "drift": "drift", "white": "white",
+}
+
+
+@pytest.fixture(scope="module")
+def noise_campaigns(tmp_path_factory):
+    from clutch_model.virtual_car.signals import make_noise
+    specs = {"white": make_noise("white", 8.0), "ar1": make_noise("ar1", 8.0, phi=0.95),
+             "lowpass": make_noise("lowpass", 8.0, cutoff_hz=10.0), "held": make_noise("held", 8.0, update_hz=10.0),
+             "median": make_noise("median", 8.0, window=5), "drift": make_noise("drift", 4.0, drift=10.0, tau_s=5.0)}
+    out = {}
+    for kind, noise in specs.items():
+        out[kind] = make_campaign(tmp_path_factory, f"noise_{kind}", seed=21, schedule="long-drive",
+                                  run_duration_s=60.0, noise={"measured_torque": noise},
+                                  clocks={"measured_torque": TopicClock(200.0, jitter_s=0.5e-3, quantum_s=1e-4)})
+    return out
+
+
+def _noise(campaign):
+    result, paths, runs = campaign
+    side = sidecar(paths, runs[0].name)
+    return runs[0].torque_measured_raw_nm - side["torque_true_nm"]
+
+
+def _lag1(x):
+    x = x - x.mean()
+    return float(np.dot(x[1:], x[:-1]) / np.dot(x, x))
+
+
+def test_noise_classes_are_in_the_bags(noise_campaigns):
+    white = _noise(noise_campaigns["white"])
+    assert np.std(white) == pytest.approx(8.0, rel=0.05)
+    assert abs(_lag1(white)) < 0.03
+    ar1 = _noise(noise_campaigns["ar1"])
+    assert _lag1(ar1) == pytest.approx(0.95, abs=0.015)       # phi recovered from the noise series
+    assert np.std(ar1) == pytest.approx(8.0, rel=0.2)
+
+    def band_ratio(x, fs=200.0):
+        f, pxx = sps.welch(x, fs=fs, nperseg=1024)
+        return float(np.mean(pxx[f > 40]) / np.mean(pxx[(f > 0.5) & (f < 5)]))
+    assert band_ratio(white) == pytest.approx(1.0, abs=0.35)
+    low = _noise(noise_campaigns["lowpass"])
+    assert band_ratio(low) < 0.02                              # 10 Hz sensor filter
+    assert np.std(low) == pytest.approx(8.0, rel=0.2)
+    held = _noise(noise_campaigns["held"])
+    assert np.mean(np.abs(np.diff(held)) < 1e-9) == pytest.approx(1 - 10.0 / 200.0, abs=0.01)   # 10 Hz held at 200 Hz
+    med = _noise(noise_campaigns["median"])
+    assert np.std(med) == pytest.approx(8.0, rel=0.1)
+    assert 0.3 < _lag1(med) < 0.9
+    drift = _noise(noise_campaigns["drift"])
+    slow = np.convolve(drift, np.ones(200) / 200, mode="valid")   # 1 s means: white averages away
+    assert np.std(slow) > 5.0 and np.std(drift - np.interp(np.arange(drift.size), np.arange(slow.size) + 100, slow)) \
+        == pytest.approx(4.0, rel=0.25)
+
+
+def test_same_seed_same_files(tmp_path_factory):
+    a = make_campaign(tmp_path_factory, "det_a", seed=5, n_runs=2, mechanisms=[{"id": "actuator_lag", "tau_s": 0.1}])
+    b = make_campaign(tmp_path_factory, "det_b", seed=5, n_runs=2, mechanisms=[{"id": "actuator_lag", "tau_s": 0.1}])
+    c = make_campaign(tmp_path_factory, "det_c", seed=6, n_runs=2, mechanisms=[{"id": "actuator_lag", "tau_s": 0.1}])
+    for pa, pb in zip(a[1]["bags"], b[1]["bags"]):
+        fa = sorted(Path(pa).glob("*.mcap"))[0].read_bytes()
+        fb = sorted(Path(pb).glob("*.mcap"))[0].read_bytes()
+        assert fa == fb
+    assert Path(a[1]["truth"]).read_text() == Path(b[1]["truth"]).read_text()
+    assert not np.array_equal(a[2][0].torque_measured_raw_nm[:100], c[2][0].torque_measured_raw_nm[:100])
+
+
+def test_schedules_mechanisms_and_effects(tmp_path_factory):
+    res, paths, runs = make_campaign(tmp_path_factory, "long", seed=8, schedule="long-drive",
+                                     mechanisms=[{"id": "actuator_lag", "tau_s": 0.08},
+                                                 {"id": "torque_offset", "offset_nm": 20.0}],
+                                     effects=[{"name": "torque_sensor_lowpass", "tau_s": 0.05}])
+    assert len(runs) == 1 and runs[0].duration_s > 235.0
+    kinds = {s["kind"] for s in res.truth["runs"][0]["segments"]}
+    assert kinds == {"hold", "ramp", "sweep", "release", "lock"}
+    model = load_model(paths["truth_model"])
+    assert sorted(m.id for m in model.mechanisms) == ["actuator_lag", "torque_offset"]
+    truth = json.loads(Path(paths["truth"]).read_text())
+    assert truth["effects"][0]["name"] == "torque_sensor_lowpass" and truth["effects"][0]["mimics"] == "actuator_lag"
+    side = sidecar(paths, runs[0].name)
+    # the sensor reading is the low-pass of (transmitted + offset): check one step response
+    fine_t, sens, trans = side["fine_t_s"], side["fine_sensor_torque_nm"], side["fine_torque_nm"]
+    a = np.exp(-(fine_t[1] - fine_t[0]) / 0.05)
+    y = np.empty_like(trans)
+    y[0] = trans[0] + 20.0
+    for k in range(1, y.size):
+        y[k] = a * y[k - 1] + (1 - a) * (trans[k] + 20.0)
+    np.testing.assert_allclose(sens, y, atol=1e-6)
+    few, _, runs3 = make_campaign(tmp_path_factory, "few", seed=9, schedule="few-long", run_duration_s=20.0,
+                                  effects=[{"name": "slip_power_fade"}, {"name": "run_friction_level"}])
+    assert len(runs3) == 3 and few.truth["expected_cause"] == "unexplained"
+    assert len(few.truth["effect_draws"]["run_friction_levels"]) == 3
+
+
+def test_friction_effect_changes_torque_not_when_off(tmp_path_factory):
+    from clutch_model.virtual_car.car_logs import CarLogSpec, synthesize_car_logs
+    base = synthesize_car_logs(CarLogSpec(seed=3, n_runs=1))
+    zero = synthesize_car_logs(CarLogSpec(seed=3, n_runs=1, effects=[{"name": "pressure_temperature_cross",
+                                                                      "coeff": 0.0}]))
+    on = synthesize_car_logs(CarLogSpec(seed=3, n_runs=1, effects=[{"name": "slip_power_fade", "k_per_kw": 0.05}]))
+    slip = ~base.runs[0].fine["locked"]
+    # the custom kernel loop with a neutral factor is the plant itself
+    np.testing.assert_allclose(zero.runs[0].fine["torque_nm"][slip], base.runs[0].fine["torque_nm"][slip], rtol=1e-6)
+    d = on.runs[0].fine["torque_nm"][slip] - base.runs[0].fine["torque_nm"][slip]
+    assert np.sqrt(np.mean(d ** 2)) > 10.0
+
+
+def test_cli_car_logs(tmp_path):
+    from clutch_sim.cli import main
+    out = tmp_path / "c"
+    assert main(["synth", "--conditions", "car-logs", "--out", str(out), "--car-runs", "2", "--car-duration", "6",
+                 "--car-mechanism", "spring_preload=500", "--effect", "torque_ripple=0.05",
+                 "--torque-noise-model", "ar1:sigma=6,phi=0.9", "--rate", "torque=100"]) == 0
+    assert len(glob.glob(str(out / "bags" / "*"))) == 2
+    truth = json.loads((out / "truth.json").read_text())
+    assert truth["noise"]["measured_torque"]["kind"] == "ar1" and truth["clocks"]["measured_torque"]["rate_hz"] == 100
+    assert main(["synth", "--conditions", "car-logs", "--out", str(tmp_path / "d"), "--effect", "nope"]) == 1
+
+
+def test_score_against_truth(short_campaign):
+    """The true model scores close to 0 against the true torque (input noise only); a model
+    with a wrong mechanism scores far worse."""
+    from clutch_model.plant.mechanisms import make_mechanism
+    from clutch_model.virtual_car.car_logs import score_against_truth, true_sensor_torque_at
+    result, paths, runs = short_campaign
+    truth_dir = Path(paths["truth"]).parent / "truth"
+    model = load_model(paths["truth_model"])
+    good = score_against_truth(model, runs, truth_dir)
+    bad = score_against_truth(model.with_mechanisms([make_mechanism("torque_offset", offset_nm=20.0)]), runs, truth_dir)
+    assert good["rmse_nm"] < 6.0 and good["samples"] > 1000
+    assert bad["rmse_nm"] == pytest.approx(np.hypot(20.0, good["rmse_nm"]), rel=0.1)
+    side = sidecar(paths, runs[0].name)
+    np.testing.assert_allclose(true_sensor_torque_at(side, side["fine_t_s"][5:9]), side["fine_sensor_torque_nm"][5:9])
