@@ -80,6 +80,21 @@ def smooth_sump(campaign: Campaign, window_s: float = 2.0) -> Campaign:
     return Campaign(runs)
 
 
+def choose_held_out(names: list, runs=None) -> list:
+    """Whole runs to hold out (split.choose_split on 2 runs or more): every third from the
+    second, moved off the campaign's extreme runs; kept for callers that need whole runs."""
+    from clutch_model.diagnosis.split import _whole_run_picks
+
+    if len(names) < 2:
+        raise DataError("holding out whole runs needs at least 2 car-test runs")
+    if runs is None:
+        n = len(names)
+        picks = [n // 2] if n == 3 else list(range(1, n, 3))
+    else:
+        picks = _whole_run_picks(list(runs))
+    return [names[k] for k in picks]
+
+
 def without_locked_rows(campaign: Campaign) -> tuple:
     """The campaign with the measured torque NaN on locked rows (the driveline, not the
     clutch's capacity, sets it there) -> (campaign, locked mask). Uses the lock-up detection
