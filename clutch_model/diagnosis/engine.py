@@ -299,7 +299,8 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
     data.per_run_feature_names, data.per_run_features = ripple_columns(campaign, calibrated.predicted)
     base = baseline_fit(calibrated, cal_base, ctx, fit_mask & scored)
     sel = select_causes(data, base, [MechanismCandidate(cid, ctx) for cid in ids], alpha=ALPHA,
-                        min_gain_frac=NAMED_GAIN_FRAC, structure_min_gain_frac=STRUCTURE_GAIN_FRAC, progress=say)
+                        min_gain_frac=NAMED_GAIN_FRAC, structure_min_gain_frac=STRUCTURE_GAIN_FRAC,
+                        plain_gain=True, progress=say)
     timings["candidates"] = time.perf_counter() - t0
 
     first = sel.steps[0].scores if sel.steps else []

@@ -186,11 +186,12 @@ def select_causes(data: SelectionData, baseline, candidates: Sequence, alpha: fl
                   min_gain_frac: float = MIN_GAIN_FRAC, lookalike_alpha: float = LOOKALIKE_ALPHA,
                   max_causes: int = MAX_CAUSES, intervals: bool = True, max_order: int = DEFAULT_MAX_ORDER,
                   refine_top: int = 3, structure_min_gain_frac: float | None = None,
-                  progress=None) -> Selection:
+                  plain_gain: bool = False, progress=None) -> Selection:
     """Forward selection of causes (see the module docstring). ``baseline`` is a fitted model
     (``predict(data)``) without any candidate. ``min_gain_frac``: materiality of a candidate
     (cut of the held-out innovation variance); ``structure_min_gain_frac``: of structure the
-    flexible residual model finds (default: the same)."""
+    flexible residual model finds (default: the same); ``plain_gain``: a cause must also lower
+    the plain held-out RMSE."""
     if structure_min_gain_frac is None:
         structure_min_gain_frac = min_gain_frac
     say = progress or (lambda msg: None)
@@ -219,15 +220,16 @@ def select_causes(data: SelectionData, baseline, candidates: Sequence, alpha: fl
         for cand in remaining:
             cmp = _compare(data, resid_cur, _resid(data, fits[cand.id]), max_order)
             scores.append(CandidateScore(cand.id, fits[cand.id], cmp))
-        scores.sort(key=lambda s: (not s.comparison.significant(alpha, min_gain_frac), -s.comparison.delta_ll))
+        scores.sort(key=lambda s: (not s.comparison.significant(alpha, min_gain_frac, plain_gain),
+                                   -s.comparison.delta_ll))
         best = scores[0]
-        if not best.comparison.significant(alpha, min_gain_frac):
+        if not best.comparison.significant(alpha, min_gain_frac, plain_gain):
             steps.append(SelectionStep(scores, None, []))
             break
         resid_best = _resid(data, best.fitted)
         look = []
         for other in scores[1:]:
-            if not other.comparison.significant(alpha, min_gain_frac):
+            if not other.comparison.significant(alpha, min_gain_frac, plain_gain):
                 continue
             head = _compare(data, _resid(data, other.fitted), resid_best, max_order)
             if not (head.p_value < lookalike_alpha and head.delta_ll > 0):
