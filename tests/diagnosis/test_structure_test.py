@@ -30,8 +30,9 @@ def test_pure_noise_is_not_structure(kind, rate_hz):
         noise = make_noise(kind, d["run_start"], SIGMA_NM, 1000 + seed, rate_hz=rate_hz)
         res = structure_test(noise, X, train, test, d["run_start"], d["t"], names)
         assert not res.structured, (kind, seed, res.comparison)
-        # the statistic stays in the body of its null distribution, not just under the threshold
-        assert res.comparison.t_stat < 2.5, (kind, seed, res.comparison.t_stat)
+        # the statistic stays in the body of its null distribution (the larger of two fits'
+        # t, least squares and GLS), not just under the threshold (t ~ 3.7 at p = 5e-4)
+        assert res.comparison.t_stat < 3.0, (kind, seed, res.comparison.t_stat)
 
 
 @pytest.mark.parametrize("rate_hz", [200, 500])
