@@ -1,15 +1,19 @@
-"""The whole loop of `clutch-sim diagnose`.
+"""The whole loop of `clutch-sim diagnose`, in named stages with typed results.
 
-1. fit the friction model on the bench (thesis §5.2.1);
-2. calibrate on the car runs it fits on (regression + Monte Carlo, thesis §5.3), holding runs
-   out: every third run from the second (interleaved in time, so drift, temperatures and
-   slip levels are on both sides), moved off the campaign's extreme slip/temperature runs so
-   validation stays inside the fit runs' envelope; the held-out runs' inputs still drive the
-   campaign's carried state, their torque is never fitted;
-3. show what the baseline gets wrong (residual features, lag, loops, drift);
-4. name the cause: fit every catalog mechanism (jointly with the same friction correction the
-   baseline got) and compare on the held-out runs against the noise level (verdict.py);
-5. extend the model with the winner, and measure the gain on the held-out runs.
+1. split: which rows are fitted and which are held out (split.py): whole runs when there are
+   enough, time spans of long runs otherwise; the simulation always runs through whole bags
+   (state carried), only the scored rows differ. Locked rows (the driveline sets the torque)
+   are scored by nothing;
+2. calibrate: the bench-fitted friction calibrated on the fitted rows (regression + Monte
+   Carlo, then the shared friction correction); written at once (calibrated_model.yaml);
+3. candidates + verdict: forward selection over the mechanism catalog (selection.py), each
+   candidate fitted on the fitted rows and named only when it predicts the held-out residual
+   better than a noise model fitted to the data (structure_test.py), what remains after the
+   named causes is indistinguishable from noise, and no lookalike does as well;
+4. extend: the model with every named cause, its parameters with 95 % intervals, and the gain
+   on the held-out rows.
+Each stage reports to ``checkpoint(stage, **outputs)`` as soon as it is done, so an
+interrupted run keeps what it knows.
 """
 from __future__ import annotations
 
@@ -23,14 +27,33 @@ from clutch_model.errors import DataError
 from clutch_model.plant.params import ClutchModel
 from clutch_model.replay import replay_runs
 from clutch_model.formats.bag_reader import Campaign
-from clutch_model.diagnosis.lockup import without_locked_torque
+from clutch_model.plant.mechanisms import CATALOG
 from clutch_model.diagnosis.measured_time import measured_time_campaign, topics_unaligned
 from clutch_model.plant.simulate import SimResult
 from clutch_model.diagnosis import features as F
+from clutch_model.diagnosis.candidates import CampaignContext, MechanismCandidate, baseline_fit
 from clutch_model.diagnosis.fitting import CANDIDATE_IDS, CandidateFit, fit_candidate
-from clutch_model.diagnosis.verdict import blocks, decide, score_candidates
+from clutch_model.diagnosis.noise_model import fit_noise_model
+from clutch_model.diagnosis.selection import Selection, SelectionData, select_causes
+from clutch_model.diagnosis.split import Split, choose_split
+from clutch_model.diagnosis.structure_test import input_features
 
-JOINT_REFITS = 3
+# Materiality of structure on car data: a named cause must cut the held-out one-step
+# innovation variance by NAMED_GAIN_FRAC; structure the inputs predict but no candidate
+# explains (unexplained) by STRUCTURE_GAIN_FRAC (a friction calibration never fits a car
+# perfectly: a residual misfit of a few % of the noise variance is calibration, not a cause).
+NAMED_GAIN_FRAC = 0.005
+STRUCTURE_GAIN_FRAC = 0.01
+ALPHA = 1e-3
+
+
+def diagnosis_candidate_ids() -> list:
+    """Every catalog mechanism diagnose tries (torque_sensor_lag included when the catalog
+    has it)."""
+    ids = list(CANDIDATE_IDS)
+    if "torque_sensor_lag" in CATALOG and "torque_sensor_lag" not in ids:
+        ids.append("torque_sensor_lag")
+    return ids
 
 
 def smooth_sump(campaign: Campaign, window_s: float = 2.0) -> Campaign:
@@ -58,34 +81,44 @@ def smooth_sump(campaign: Campaign, window_s: float = 2.0) -> Campaign:
 
 
 def choose_held_out(names: list, runs=None) -> list:
-    """Every third run from the second (time order); one run when there are two or three.
+    """Whole runs to hold out (split.choose_split on 2 runs or more): every third from the
+    second, moved off the campaign's extreme runs; kept for callers that need whole runs."""
+    from clutch_model.diagnosis.split import _whole_run_picks
 
-    With the runs given, a chosen run that holds an extreme of the campaign (highest or lowest
-    mean |slip| or sump temperature) is swapped for its next (else previous) neighbour in time
-    that holds none: the held-out runs then test the model inside the fit runs' operating
-    envelope instead of an extrapolation of the calibration (a k_V*w friction term fitted at
-    slips up to 8 rad/s can pass for drag torque there, and not at 14 rad/s)."""
-    n = len(names)
-    if n < 2:
-        raise DataError("diagnose needs at least 2 car-test runs (one is held out for validation)")
-    if n <= 3:
-        picks = [n // 2] if n == 3 else [n - 1]
+    if len(names) < 2:
+        raise DataError("holding out whole runs needs at least 2 car-test runs")
+    if runs is None:
+        n = len(names)
+        picks = [n // 2] if n == 3 else list(range(1, n, 3))
     else:
-        picks = list(range(1, n, 3))
-    if runs is not None and n >= 4:
-        slip = np.array([float(np.mean(np.abs(r.slip_speed_rad_s))) for r in runs])
-        sump = np.array([float(np.mean(r.sump_temperature_c)) for r in runs])
-        extreme = {int(np.argmax(slip)), int(np.argmin(slip)), int(np.argmax(sump)), int(np.argmin(sump))}
-        chosen = set()
-        for k in picks:
-            if k in extreme:
-                for j in (k + 1, k - 1, k + 2, k - 2):
-                    if 0 <= j < n and j not in extreme and j not in chosen and j not in picks:
-                        k = j
-                        break
-            chosen.add(k)
-        picks = sorted(chosen)
+        picks = _whole_run_picks(list(runs))
     return [names[k] for k in picks]
+
+
+def without_locked_rows(campaign: Campaign) -> tuple:
+    """The campaign with the measured torque NaN on locked rows (the driveline, not the
+    clutch's capacity, sets it there) -> (campaign, locked mask). Uses the lock-up detection
+    from the data when the project has it (diagnosis.lockup), else the model's lock tolerance
+    on the measured slip."""
+    try:
+        from clutch_model.diagnosis.lockup import without_locked_torque
+    except ImportError:
+        without_locked_torque = None
+    before = np.isfinite(campaign.torque_measured)
+    if without_locked_torque is not None:
+        campaign, _ = without_locked_torque(campaign)
+        return campaign, before & ~np.isfinite(campaign.torque_measured)
+    from dataclasses import replace
+
+    runs, locked = [], []
+    for r in campaign.runs:
+        lk = np.abs(r.slip_speed_rad_s) < 1e-3
+        tq = r.torque_measured_nm
+        if tq is not None and lk.any():
+            tq = np.where(lk, np.nan, tq)
+        runs.append(replace(r, torque_measured_nm=tq))
+        locked.append(lk)
+    return Campaign(runs), before & np.concatenate(locked)
 
 
 @dataclass
@@ -94,12 +127,12 @@ class Diagnosis:
     reason: str
     evidence: str
     cause_parameters: dict
-    sigma_nm: float
+    sigma_nm: float                  # noise level of the final model's residual (stationary sd)
     rmse: dict                       # nominal, bench, calibrated, extended (held-out)
-    held_out: list
+    held_out: list                   # report labels: "<bag>" or "<bag>[t0:t1]"
     fit_runs: list
-    candidates: list                 # CandidateFit, sorted by held-out RMSE
-    scores: list
+    candidates: list                 # CandidateFit of the first selection step, by held-out RMSE
+    scores: list                     # selection.CandidateScore of the first step
     features_r2: dict
     nominal_model: ClutchModel
     bench_model: ClutchModel
@@ -110,7 +143,14 @@ class Diagnosis:
     calibrated_sim: SimResult        # plant signals of the calibrated model on the campaign
     extended_fit: CandidateFit | None
     nominal_pred: np.ndarray
-    noise_phi: float = 0.0
+    causes: list = field(default_factory=list)        # [{"id", "parameters", "parameters_ci95", ...}]
+    cause_ci95: dict = field(default_factory=dict)
+    selection: Selection | None = None
+    split: Split | None = None
+    fit_mask: np.ndarray | None = None
+    eval_mask: np.ndarray | None = None
+    locked_rows: int = 0
+    noise: dict = field(default_factory=dict)
     bench_info: dict = field(default_factory=dict)
     calibration_info: dict = field(default_factory=dict)
     timings: dict = field(default_factory=dict)
@@ -120,23 +160,76 @@ class Diagnosis:
         c, e = self.rmse["calibrated"], self.rmse["extended"]
         return 100.0 * (c - e) / c if c > 0 else 0.0
 
+    @property
+    def held_out_runs(self) -> list:
+        """Names of the bags with held-out rows."""
+        return sorted({h.run for h in self.split.held_out}) if self.split else list(self.held_out)
+
 
 def _rmse(resid, mask):
     ok = mask & np.isfinite(resid)
     return float(np.sqrt(np.mean(resid[ok] ** 2))) if ok.any() else math.nan
 
 
+def _masked_torque(campaign: Campaign, keep: np.ndarray) -> Campaign:
+    """The campaign with the measured torque NaN outside ``keep`` (what calibration may see)."""
+    from dataclasses import replace
+
+    runs = []
+    for r, sl in campaign.slices():
+        tq = r.torque_measured_nm
+        if tq is not None:
+            tq = np.where(keep[sl], tq, np.nan)
+        runs.append(replace(r, torque_measured_nm=tq))
+    return Campaign(runs)
+
+
+def residual_library(campaign: Campaign, sim: SimResult, torque: np.ndarray):
+    """Input signals the flexible residual model may use (structure_test.input_features):
+    force, |slip|, pack temperature, slip power, dissipated energy, pressure x temperature, and
+    the slip angle (once per revolution), with the predicted torque."""
+    angle = np.zeros(campaign.t.size)
+    for _, sl in campaign.slices():
+        t = campaign.t[sl]
+        dt = np.diff(t, prepend=t[0])
+        angle[sl] = np.cumsum(campaign.slip[sl] * dt)
+    theta = sim.pack_temperature_c
+    signals = {"force": np.maximum(campaign.force, 0.0), "slip": np.abs(campaign.slip),
+               "pack_temperature": theta, "slip_power": np.abs(sim.power_w),
+               "energy": sim.energy_j, "pressure_x_temperature": sim.pressure_mpa * (theta - 60.0),
+               "sin_slip_angle": np.sin(angle), "cos_slip_angle": np.cos(angle)}
+    return input_features(signals, campaign.t, campaign.run_start, torque=torque)
+
+
+def ripple_columns(campaign: Campaign, torque: np.ndarray):
+    """Once-per-revolution columns (additive and torque-proportional sin/cos of the slip
+    angle), fitted per run by per_run_structure_test (the phase differs from run to run)."""
+    angle = np.zeros(campaign.t.size)
+    for _, sl in campaign.slices():
+        t = campaign.t[sl]
+        angle[sl] = np.cumsum(campaign.slip[sl] * np.diff(t, prepend=t[0]))
+    tq = torque / (np.nanstd(torque) or 1.0)
+    names = ["sin slip angle", "cos slip angle", "torque x sin slip angle", "torque x cos slip angle"]
+    return names, np.column_stack([np.sin(angle), np.cos(angle), tq * np.sin(angle), tq * np.cos(angle)])
+
+
 def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held_out=None,
                       candidates=None, calibrate=None, progress=None, bench_info=None,
-                      measured_time=None) -> Diagnosis:
+                      checkpoint=None, measured_time=None) -> Diagnosis:
     """Diagnose a campaign given the bench-fitted model. ``measured_time`` (default: when the
     torque and force topics are not aligned) compares model and measurement at the measured
     torque's own stamps (``measured_time_campaign``) instead of the replay grid.
     ``calibrate(model, fit_campaign)`` may
     add a car-data calibration (regression + Monte Carlo) before the shared friction
-    correction; it returns (model, info)."""
+    correction; it returns (model, info). ``held_out``: report labels ("bag" or
+    "bag[t0:t1]") to hold out instead of the automatic split. ``checkpoint(stage, **outputs)``
+    is called as each stage completes ("split", "calibrated", "selected")."""
     tick = time.perf_counter()
     timings = {}
+    say = progress or (lambda msg: None)
+    emit = checkpoint or (lambda stage, **kw: None)
+
+    # -- stage 1: split ---------------------------------------------------------------------
     campaign = runs if isinstance(runs, Campaign) else Campaign(list(runs))
     if measured_time is None:
         measured_time = topics_unaligned(campaign.runs)
@@ -145,132 +238,130 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
         # interpolated between their samples (diagnosis.measured_time)
         campaign = measured_time_campaign(campaign)
     campaign = smooth_sump(campaign)
-    # lock-up phases (found from the slip data): the driveline sets the torque there
-    campaign, _lockups = without_locked_torque(campaign)
+    # lock-up phases (found from the slip data, diagnosis.lockup): the driveline sets the torque
+    campaign, locked = without_locked_rows(campaign)
     names = campaign.names
     if not np.isfinite(campaign.torque_measured).any():
         raise DataError("the bags have no /clutch/measured_torque: nothing to diagnose against")
-    held_out = list(held_out) if held_out else choose_held_out(names, campaign.runs)
-    unknown = set(held_out) - set(names)
-    if unknown:
-        raise DataError(f"held-out run not in the campaign: {sorted(unknown)[0]}")
-    fit_runs = [n for n in names if n not in held_out]
-    if not fit_runs:
-        raise DataError("every run is held out: nothing left to fit on")
-    held_idx = [names.index(n) for n in held_out]
-    eval_mask = np.isin(campaign.run_index, held_idx)
-    fit_mask = ~eval_mask
-    say = progress or (lambda msg: None)
+    split = choose_split(campaign.runs, held_out)
+    fit_mask, eval_mask = split.masks(names, campaign.run_index, campaign.t)
+    scored = np.isfinite(campaign.torque_measured)
+    if not (eval_mask & scored).any():
+        raise DataError("the held-out data has no measured torque outside lock-up")
+    if not (fit_mask & scored).any():
+        raise DataError("the fitted data has no measured torque outside lock-up")
+    fit_runs = split.fit_runs(names)
+    say(f"split: {split.how}; held out {', '.join(split.labels)}"
+        + (f"; {int(locked.sum())} locked rows kept out of the residuals" if locked.any() else ""))
+    emit("split", split=split, locked_rows=int(locked.sum()))
 
-    # nominal and bench models on the campaign
+    # -- stage 2: calibrate -----------------------------------------------------------------
     nominal_rep = replay_runs(nominal, campaign)
     nominal_resid = campaign.torque_measured - nominal_rep.torque_sim
     bench_rep = replay_runs(bench_model, campaign)
     energy_total = float(bench_rep.sim.energy_j[-1])
     torque_scale = float(np.nanpercentile(np.abs(campaign.torque_measured), 95))
-    sigma_guess = F.noise_sigma(campaign.torque_measured - bench_rep.torque_sim, campaign.run_start)
+    sigma_guess = F.noise_sigma(np.where(fit_mask, campaign.torque_measured - bench_rep.torque_sim, np.nan),
+                                campaign.run_start)
     if not np.isfinite(sigma_guess) or sigma_guess <= 0:
         sigma_guess = max(1e-3 * torque_scale, 1e-6)
     timings["simulate nominal"] = time.perf_counter() - tick
-
-    # calibration on the fit runs: optional regression + Monte Carlo, then the shared correction
     calibration_info = {}
     cal_base = bench_model
     t0 = time.perf_counter()
     if calibrate is not None:
-        say("calibrating friction on the fit runs (regression + Monte Carlo)")
-        cal_base, calibration_info = calibrate(bench_model, campaign.subset(fit_runs))
+        say("calibrating friction on the fitted data (regression + Monte Carlo)")
+        whole = all(h.whole_run for h in split.held_out)
+        fit_campaign = campaign.subset(fit_runs) if whole else _masked_torque(campaign, fit_mask)
+        cal_base, calibration_info = calibrate(bench_model, fit_campaign)
     timings["car calibration"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     say("fitting the baseline friction correction")
     calibrated = fit_candidate(cal_base, campaign, fit_mask, None, energy_total, torque_scale,
                                noise_sigma_nm=sigma_guess)
     timings["friction correction"] = time.perf_counter() - t0
+    calibrated.held_out_rmse_nm = _rmse(calibrated.residual, eval_mask)
+    rmse = {"nominal": _rmse(nominal_resid, eval_mask),
+            "bench": _rmse(campaign.torque_measured - bench_rep.torque_sim, eval_mask),
+            "calibrated": calibrated.held_out_rmse_nm}
+    emit("calibrated", model=calibrated.model, rmse=dict(rmse), split=split, info=calibration_info)
 
-    resid0 = calibrated.residual
-
-    # candidates: every mechanism alone (one parameter, cheap) on both the car-calibrated and
-    # the bench-fitted friction -- a car calibration may have absorbed part of the mechanism --
-    # then the JOINT_REFITS best on the fit runs refitted jointly with the friction correction,
-    # from the friction they did best on
-    fits, tried = {}, {}
-    ids = list(candidates) if candidates else CANDIDATE_IDS
+    # -- stage 3: candidates and verdict (forward selection with held-out tests) -------------
     t0 = time.perf_counter()
-    starts = [(calibrated.model, cal_base)]
-    if cal_base is not bench_model:
-        starts.append((bench_model, bench_model))
-    for cid in ids:
-        say(f"fitting candidate {cid}")
-        tried[cid] = []
-        for start_model, joint_base in starts:
-            fit = fit_candidate(start_model, campaign, fit_mask, cid, energy_total, torque_scale,
-                                fit_friction=False, noise_sigma_nm=sigma_guess)
-            tried[cid].append((fit, joint_base))
-        fits[cid] = min((f for f, _ in tried[cid]), key=lambda f: f.fit_rmse_nm)
-    # joint refits from every start: a car calibration that absorbed a drift can trap the
-    # joint fit in it, the bench friction does not
-    for cid in sorted(fits, key=lambda k: fits[k].fit_rmse_nm)[:JOINT_REFITS]:
-        say(f"refitting {cid} jointly with the friction correction")
-        for single, joint_base in tried[cid]:
-            joint = fit_candidate(joint_base, campaign, fit_mask, cid, energy_total, torque_scale,
-                                  noise_sigma_nm=sigma_guess, start=single.parameters)
-            if joint.fit_rmse_nm <= fits[cid].fit_rmse_nm:
-                fits[cid] = joint
-    fits = list(fits.values())
-    for fit in fits:
-        fit.held_out_rmse_nm = _rmse(fit.residual, eval_mask)
+    sim_cal = replay_runs(calibrated.model, campaign).sim
+    lib_names, lib = residual_library(campaign, sim_cal, calibrated.predicted)
+    ctx = CampaignContext(campaign, energy_total, torque_scale, sigma_guess,
+                          bench_model if cal_base is not bench_model else None)
+    ids = list(candidates) if candidates else diagnosis_candidate_ids()
+    data = SelectionData(y=campaign.torque_measured, t=campaign.t, run_start=campaign.run_start,
+                         train_mask=fit_mask & scored, test_mask=eval_mask & scored, features=lib,
+                         feature_names=lib_names, groups=campaign.run_index)
+    data.per_run_feature_names, data.per_run_features = ripple_columns(campaign, calibrated.predicted)
+    base = baseline_fit(calibrated, cal_base, ctx, fit_mask & scored)
+    sel = select_causes(data, base, [MechanismCandidate(cid, ctx) for cid in ids], alpha=ALPHA,
+                        min_gain_frac=NAMED_GAIN_FRAC, structure_min_gain_frac=STRUCTURE_GAIN_FRAC,
+                        plain_gain=True, progress=say)
     timings["candidates"] = time.perf_counter() - t0
-    calibrated.held_out_rmse_nm = _rmse(resid0, eval_mask)
 
-    labels = blocks(campaign.t, eval_mask, campaign.run_index)
-    # the noise level, from the residual of the model that fits the fit runs best (the least
-    # structure left in it: step transients of an unmodelled lag would otherwise pass for noise)
-    ref = min([calibrated] + fits, key=lambda f: f.fit_rmse_nm)
-    sigma_rows = F.noise_profile(ref.residual, campaign.t, campaign.run_start)
-    sigma_rows = np.where(np.isfinite(sigma_rows) & (sigma_rows > 0), sigma_rows,
-                          max(float(np.nanstd(resid0)) * 1e-3, 1e-9))
-    noise_phi = F.noise_ar1(ref.residual, campaign.run_start)
-    mse0, excess, noise_ms, scores = score_candidates(resid0, {f.id: f.residual for f in fits}, sigma_rows, labels,
-                                                      noise_phi)
-    sigma = math.sqrt(noise_ms)
-    held_meas = campaign.torque_measured[eval_mask]
-    torque_ms = float(np.nanmean(held_meas ** 2)) if np.isfinite(held_meas).any() else 0.0
-    cause, best, reason = decide(mse0, excess, noise_ms, scores, torque_ms)
+    first = sel.steps[0].scores if sel.steps else []
+    fits = []
+    for sc in first:
+        f = sc.fitted.fit
+        f.held_out_rmse_nm = _rmse(f.residual, eval_mask)
+        fits.append(f)
     fits.sort(key=lambda f: f.held_out_rmse_nm)
 
-    # features of the calibrated residual (evidence)
-    sim_cal = replay_runs(calibrated.model, campaign).sim
+    # evidence: what the calibrated residual follows
     feats = F.feature_signals(campaign, sim_cal)
-    r2 = F.explained_variance(resid0, feats, campaign.run_index)
+    r2 = F.explained_variance(np.where(scored, calibrated.residual, np.nan), feats, campaign.run_index)
 
+    # -- stage 4: extend ------------------------------------------------------------------------
+    cause = {"named": None, "none": "none", "unexplained": "unexplained"}[sel.verdict]
     extended_fit = None
     extended_model = calibrated.model
-    cause_params = {}
-    if best is not None:
-        extended_fit = next(f for f in fits if f.id == cause)
+    cause_params, cause_ci, causes = {}, {}, []
+    if sel.verdict == "named":
+        cause = sel.causes[0].id
+        extended_fit = sel.final.fit
         extended_model = extended_fit.model
-        cause_params = dict(extended_fit.parameters)
-        if cause == "friction_degradation":
+        for c in sel.causes:
+            causes.append({"id": c.id, "parameters": dict(c.parameters), "parameters_ci95": dict(c.parameters_ci95),
+                           "held_out_t": c.comparison.t_stat, "held_out_p": c.comparison.p_value,
+                           "innovation_variance_cut": c.comparison.gain_frac})
+        # the parameters as refitted in the final model (the later causes refit on top)
+        final_mechs = {m.id: m for m in extended_model.mechanisms}
+        for c in causes:
+            m = final_mechs.get(c["id"])
+            if m is not None:
+                c["parameters"] = {k: float(v) for k, v in m.values.items()
+                                   if isinstance(v, (int, float)) and k in c["parameters"]}
+        cause_params = dict(causes[0]["parameters"])
+        cause_ci = dict(causes[0]["parameters_ci95"])
+        if "friction_degradation" in final_mechs:
             _record_energy_history(extended_model, campaign)
-    rmse = {
-        "nominal": _rmse(nominal_resid, eval_mask),
-        "bench": _rmse(campaign.torque_measured - bench_rep.torque_sim, eval_mask),
-        "calibrated": calibrated.held_out_rmse_nm,
-        "extended": extended_fit.held_out_rmse_nm if extended_fit else calibrated.held_out_rmse_nm,
-    }
+    rmse["extended"] = _rmse(extended_fit.residual, eval_mask) if extended_fit else rmse["calibrated"]
     if cause == "unexplained":
         top = sorted(r2.items(), key=lambda kv: -kv[1])[:3]
-        cause_params = {"residual_follows": {k: round(v, 3) for k, v in top}}
-    evidence = _evidence(cause, reason, sigma, rmse, scores, r2, cause_params)
+        cause_params = {"residual_follows": {k: round(v, 3) for k, v in top},
+                        "closest": list(sel.closest),
+                        "closest_leaves": {k: v for k, v in sel.closest_leaves.items() if k != "structure_follows"}}
+    final_resid = extended_fit.residual if extended_fit else calibrated.residual
+    nm = fit_noise_model(np.where(fit_mask & scored, final_resid, np.nan), campaign.run_start)
+    noise = {"ar_order": nm.order, "innovation_sigma_nm": nm.innovation_sigma,
+             "sigma_nm": math.sqrt(nm.variance),
+             "ar_coefficients": [float(v) for v in -nm.a[1:6]]}
+    evidence = _evidence(cause, sel, rmse, r2, causes, noise)
     timings["total"] = time.perf_counter() - tick
-    return Diagnosis(cause_id=cause, reason=reason, evidence=evidence, cause_parameters=cause_params,
-                     sigma_nm=sigma, rmse=rmse, held_out=held_out, fit_runs=fit_runs, candidates=fits,
-                     scores=scores, features_r2=r2, nominal_model=nominal, bench_model=bench_model,
-                     calibrated_model=calibrated.model, extended_model=extended_model, campaign=campaign,
-                     calibrated_fit=calibrated, calibrated_sim=sim_cal, extended_fit=extended_fit,
-                     nominal_pred=nominal_rep.torque_sim,
-                     bench_info=bench_info or {}, calibration_info=calibration_info, timings=timings,
-                     noise_phi=noise_phi)
+    d = Diagnosis(cause_id=cause, reason=sel.reason, evidence=evidence, cause_parameters=cause_params,
+                  sigma_nm=noise["sigma_nm"], rmse=rmse, held_out=split.labels, fit_runs=fit_runs,
+                  candidates=fits, scores=first, features_r2=r2, nominal_model=nominal, bench_model=bench_model,
+                  calibrated_model=calibrated.model, extended_model=extended_model, campaign=campaign,
+                  calibrated_fit=calibrated, calibrated_sim=sim_cal, extended_fit=extended_fit,
+                  nominal_pred=nominal_rep.torque_sim, causes=causes, cause_ci95=cause_ci, selection=sel,
+                  split=split, fit_mask=fit_mask, eval_mask=eval_mask, locked_rows=int(locked.sum()),
+                  noise=noise, bench_info=bench_info or {}, calibration_info=calibration_info, timings=timings)
+    emit("selected", diagnosis=d)
+    return d
 
 
 def _record_energy_history(model: ClutchModel, campaign: Campaign) -> None:
@@ -285,19 +376,24 @@ def _record_energy_history(model: ClutchModel, campaign: Campaign) -> None:
     model.mechanism("friction_degradation").values["energy_history"] = history
 
 
-def _evidence(cause, reason, sigma, rmse, scores, r2, params) -> str:
+def _evidence(cause, sel: Selection, rmse, r2, causes, noise) -> str:
     top = [(k, v) for k, v in sorted(r2.items(), key=lambda kv: -kv[1])[:3] if v >= 0.05]
     follows = (", ".join(f"{k} (R² {v:.2f})" for k, v in top) if top
                else "none of the candidate features (each explains < 5 % of it)")
-    ranked = "; ".join(f"{s.id} {s.rmse:.1f} N·m (z={s.z_stat:.1f}, explains {100 * s.explained:.0f} %)"
-                       for s in scores[:3])
-    base = (f"On the held-out runs the calibrated baseline has RMSE {rmse['calibrated']:.2f} N·m against a "
-            f"sensor-noise level of {sigma:.2f} N·m estimated from the data (nominal RC-1: "
-            f"{rmse['nominal']:.2f} N·m). Its residual follows {follows}. Best refitted candidates: {ranked}.")
+    first = sel.steps[0].scores[:3] if sel.steps else []
+    ranked = "; ".join(f"{s.id} {s.comparison.rmse_alt:.2f} N·m (held-out t = {s.comparison.t_stat:.1f}, "
+                       f"innovation variance {-100 * s.comparison.gain_frac:+.1f} %)" for s in first)
+    base = (f"On the held-out data the calibrated baseline has RMSE {rmse['calibrated']:.2f} N·m (nominal RC-1: "
+            f"{rmse['nominal']:.2f} N·m); the noise model fitted to the data is AR({noise['ar_order']}) with "
+            f"innovation sd {noise['innovation_sigma_nm']:.2f} N·m (sd {noise['sigma_nm']:.2f} N·m). The residual "
+            f"follows {follows}. Best candidates against the noise model on held-out data: {ranked}.")
     if cause == "none":
-        return base + f" Verdict none: {reason}; no structural discrepancy beyond noise and calibration."
+        return base + f" Verdict none: {sel.reason}."
     if cause == "unexplained":
-        return base + f" Verdict unexplained: {reason}."
-    pstr = ", ".join(f"{k} = {v:.4g}" for k, v in params.items())
-    return (base + f" Verdict {cause} ({pstr}): {reason}; the extended model's held-out RMSE is "
+        return base + f" Verdict unexplained: {sel.reason}."
+    named = "; ".join(f"{c['id']} (" + ", ".join(
+        f"{k} = {v:.4g} [{c['parameters_ci95'].get(k, [math.nan, math.nan])[0]:.4g}, "
+        f"{c['parameters_ci95'].get(k, [math.nan, math.nan])[1]:.4g}]" for k, v in c["parameters"].items()) + ")"
+        for c in causes)
+    return (base + f" Verdict: {named}; {sel.reason}; the extended model's held-out RMSE is "
             f"{rmse['extended']:.2f} N·m.")

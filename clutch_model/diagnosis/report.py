@@ -2,11 +2,13 @@
 from __future__ import annotations
 
 import html
+import json
+import math
 from pathlib import Path
 
 import numpy as np
 
-from clutch_model.formats.results import jsonable, write_json
+from clutch_model.formats.results import jsonable
 from clutch_model.plant.params import save_model
 from clutch_model.diagnosis import features as F
 from clutch_model.diagnosis.engine import Diagnosis
@@ -14,30 +16,50 @@ from clutch_model.diagnosis.engine import Diagnosis
 
 def report_dict(d: Diagnosis) -> dict:
     cand = []
-    score = {s.id: s for s in d.scores}
-    for f in d.candidates:
-        s = score.get(f.id)
-        cand.append({"id": f.id, "held_out_rmse_nm": f.held_out_rmse_nm, "fit_rmse_nm": f.fit_rmse_nm,
+    for sc in d.scores:
+        f, c = sc.fitted.fit, sc.comparison
+        cand.append({"id": sc.id, "held_out_rmse_nm": f.held_out_rmse_nm, "fit_rmse_nm": f.fit_rmse_nm,
                      "parameters": f.parameters, "refit_with_friction": f.joint,
                      "friction_correction": [float(v) for v in f.friction_correction],
-                     "explained_fraction": s.explained if s else None,
-                     "z": s.z_stat if s else None, "block_t": s.t_stat if s else None,
-                     "significant": s.significant if s else None})
+                     "held_out_t": c.t_stat, "held_out_p": c.p_value, "held_out_delta_loglik": c.delta_ll,
+                     "innovation_variance_cut": c.gain_frac, "significant": sc.significant})
+    cand.sort(key=lambda c: c["held_out_rmse_nm"] if c["held_out_rmse_nm"] is not None else math.inf)
+    sel = d.selection
+    steps = []
+    for k, st in enumerate(sel.steps if sel else []):
+        steps.append({"step": k + 1, "chosen": st.chosen, "lookalikes": st.lookalikes,
+                      "scores": [{"id": sc.id, "held_out_t": sc.comparison.t_stat,
+                                  "held_out_p": sc.comparison.p_value,
+                                  "innovation_variance_cut": sc.comparison.gain_frac,
+                                  "parameters": sc.fitted.parameters} for sc in st.scores]})
+
+    def structure(st):
+        if st is None:
+            return None
+        return {"structured": st.structured, "held_out_t": st.comparison.t_stat, "held_out_p": st.p_value,
+                "innovation_variance_cut": st.gain_frac, "follows": st.top_features(3)}
+
+    cause = {"id": d.cause_id, "evidence": d.evidence, "parameters": d.cause_parameters,
+             "parameters_ci95": d.cause_ci95}
     return jsonable({
-        "cause": {"id": d.cause_id, "evidence": d.evidence, "parameters": d.cause_parameters},
+        "status": "complete",
+        "cause": cause,
+        "causes": d.causes,
         "rmse_nm": {"nominal": d.rmse["nominal"], "calibrated": d.rmse["calibrated"],
                     "extended": d.rmse["extended"], "bench_fit": d.rmse["bench"]},
         "gain_pct": d.gain_pct,
         "held_out_runs": d.held_out,
         "fit_runs": d.fit_runs,
-        "split": "every third run from the second, in log-time order (interleaved over the campaign "
-                 "so drift, temperatures and slip levels are on both sides), moved off the runs with "
-                 "the campaign's extreme slip or sump temperature so validation stays inside the fit "
-                 "runs' envelope; held-out inputs still drive the campaign's carried state, their "
-                 "torque is never fitted",
+        "split": d.split.how if d.split else "",
+        "locked_rows": d.locked_rows,
+        "noise_model": d.noise,
         "noise_sigma_nm": d.sigma_nm,
-        "noise_ar1": d.noise_phi,
         "candidates": cand,
+        "selection": {"verdict": sel.verdict if sel else None, "reason": sel.reason if sel else "",
+                      "steps": steps,
+                      "baseline_structure": structure(sel.baseline_structure) if sel else None,
+                      "remainder_structure": structure(sel.remainder_structure) if sel else None,
+                      "closest": sel.closest if sel else [], "closest_leaves": sel.closest_leaves if sel else {}},
         "residual_features_r2": d.features_r2,
         "bench_fit": d.bench_info,
         "calibration": d.calibration_info,
@@ -52,15 +74,16 @@ def _plots(d: Diagnosis, out: Path) -> list:
 
     c = d.campaign
     files = []
-    held = np.isin(c.run_index, [c.names.index(n) for n in d.held_out])
+    held = d.eval_mask if d.eval_mask is not None else np.isin(c.run_index, [c.names.index(n) for n in d.held_out])
     cal_pred = d.calibrated_fit.predicted
     ext_pred = d.extended_fit.predicted if d.extended_fit else cal_pred
     resid = d.calibrated_fit.residual
 
     # 1. held-out runs: measured vs models
-    runs = [r for r in c.runs if r.name in d.held_out]
+    held_runs = d.held_out_runs
+    runs = [r for r in c.runs if r.name in held_runs]
     fig, axes = plt.subplots(len(runs), 1, figsize=(10, 2.6 * len(runs)), squeeze=False)
-    for ax, (r, sl) in zip(axes[:, 0], [(r, sl) for r, sl in c.slices() if r.name in d.held_out]):
+    for ax, (r, sl) in zip(axes[:, 0], [(r, sl) for r, sl in c.slices() if r.name in held_runs]):
         ax.plot(r.t, c.torque_measured[sl], ".", ms=1.5, color="0.5", label="measured")
         ax.plot(r.t, d.nominal_pred[sl], lw=1, color="tab:orange", label="nominal RC-1")
         ax.plot(r.t, cal_pred[sl], lw=1, color="tab:blue", label="calibrated")
@@ -107,7 +130,7 @@ def _plots(d: Diagnosis, out: Path) -> list:
     axes[0].axvline(lags[k] * 1e3, color="r", lw=0.8)
     axes[0].set_title(f"lag cross-correlation: peak at {lags[k] * 1e3:.0f} ms", fontsize=9)
     axes[0].set_xlabel("lag of measured vs simulated [ms]")
-    r0, sl0 = next((r, sl) for r, sl in c.slices() if r.name == d.held_out[0])
+    r0, sl0 = next((r, sl) for r, sl in c.slices() if r.name == held_runs[0])
     axes[1].plot(c.force[sl0], c.torque_measured[sl0], ".", ms=1.5, color="0.5", label="measured")
     axes[1].plot(c.force[sl0], cal_pred[sl0], lw=0.8, color="tab:blue", label="calibrated")
     axes[1].set_title(f"torque vs force, run {r0.name} (hysteresis loop)", fontsize=9)
@@ -116,7 +139,7 @@ def _plots(d: Diagnosis, out: Path) -> list:
     axes[1].legend(fontsize=7)
     drift = F.drift_per_run(c, resid, cal_pred)
     e_end = [float(energy[sl][-1]) for _, sl in c.slices()]
-    colors = ["tab:red" if name in d.held_out else "tab:blue" for name, *_ in drift]
+    colors = ["tab:red" if name in held_runs else "tab:blue" for name, *_ in drift]
     axes[2].scatter(e_end, [100 * x[2] for x in drift], c=colors)
     axes[2].axhline(0, color="k", lw=0.5)
     axes[2].set_title("drift over the campaign (red: held-out)", fontsize=9)
@@ -153,30 +176,90 @@ def _campaign_time(c):
     return out
 
 
+def _write_text(path: Path, text: str) -> None:
+    """Write through a temporary file and rename, so an interrupted run never leaves half a file."""
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(text)
+    tmp.replace(path)
+
+
+def _save_model(model, path: Path, header: str) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    save_model(model, tmp, header=header)
+    tmp.replace(path)
+
+
+class ProgressiveReport:
+    """Writes each output of a diagnosis as soon as it is known (engine checkpoint): the split
+    and the calibrated model first (calibrated_model.yaml, extended_model.yaml = the
+    calibrated model until a cause is named, a report.json with ``status``), then the whole
+    report. Ctrl-C keeps what was written."""
+
+    def __init__(self, out_dir):
+        self.out = Path(out_dir)
+        self.out.mkdir(parents=True, exist_ok=True)
+        self.partial = {"status": "started"}
+
+    def _partial(self, status: str, **fields):
+        self.partial.update(fields)
+        self.partial["status"] = status
+        _write_text(self.out / "report.json", json.dumps(jsonable(self.partial), indent=2, allow_nan=False))
+
+    def __call__(self, stage: str, **kw):
+        if stage == "split":
+            self._partial("split done; calibrating", held_out_runs=kw["split"].labels, split=kw["split"].how,
+                          locked_rows=kw.get("locked_rows", 0))
+        elif stage == "calibrated":
+            header = "clutch-sim diagnose: calibrated baseline (bench fit + car calibration)"
+            _save_model(kw["model"], self.out / "calibrated_model.yaml", header)
+            _save_model(kw["model"], self.out / "extended_model.yaml",
+                        "clutch-sim diagnose: extended model (= the calibrated model until a cause is named)")
+            self._partial("calibrated; naming causes", rmse_nm=dict(kw["rmse"]), calibration=kw.get("info", {}))
+        elif stage == "selected":
+            write_report(kw["diagnosis"], self.out)
+
+
 def write_report(d: Diagnosis, out_dir) -> dict:
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     rep = report_dict(d)
-    save_model(d.calibrated_model, out / "calibrated_model.yaml",
-               header="clutch-sim diagnose: calibrated baseline (bench fit + car calibration)")
-    save_model(d.extended_model, out / "extended_model.yaml",
-               header=f"clutch-sim diagnose: extended model, cause = {d.cause_id}")
-    write_json(out / "report.json", rep)
+    _save_model(d.calibrated_model, out / "calibrated_model.yaml",
+                "clutch-sim diagnose: calibrated baseline (bench fit + car calibration)")
+    _save_model(d.extended_model, out / "extended_model.yaml",
+                f"clutch-sim diagnose: extended model, cause = {d.cause_id}"
+                + (f" ({', '.join(c['id'] for c in d.causes)})" if len(d.causes) > 1 else ""))
+    _write_text(out / "report.json", json.dumps(jsonable(rep), indent=2, allow_nan=False) + "\n")
     files = _plots(d, out)
-    (out / "report.html").write_text(_html(d, rep, files))
+    _write_text(out / "report.html", _html(d, rep, files))
     return rep
 
 
 def _html(d: Diagnosis, rep: dict, files) -> str:
     e = html.escape
     verdict = {"none": "No structural discrepancy beyond noise and calibration",
-               "unexplained": "Structure that no known mechanism explains"}.get(d.cause_id, f"Cause: {d.cause_id}")
-    params = ", ".join(f"{e(str(k))} = {e(f'{v:.4g}' if isinstance(v, float) else str(v))}"
-                       for k, v in d.cause_parameters.items())
+               "unexplained": "Structure that no known mechanism explains"}.get(
+        d.cause_id, "Cause" + ("s: " if len(d.causes) > 1 else ": ") + ", ".join(c["id"] for c in d.causes))
+
+    def interval(c, k, v):
+        lo, hi = c.get("parameters_ci95", {}).get(k, (None, None))
+        ci = f" (95 %: {lo:.4g} – {hi:.4g})" if lo is not None and hi is not None else ""
+        return f"{k} = {v:.4g}{ci}"
+
+    if d.causes:
+        params = "; ".join(e(", ".join(interval(c, k, v) for k, v in c["parameters"].items())) for c in d.causes)
+    elif d.cause_id == "unexplained" and d.selection is not None and d.selection.closest:
+        left = d.selection.closest_leaves
+        params = e(f"closest: {', '.join(d.selection.closest)}, which leaves a held-out RMSE of "
+                   f"{left.get('held_out_rmse', float('nan')):.2f} N·m"
+                   + (f" with structure the inputs predict (t = {left['structure_t']:.1f})"
+                      if "structure_t" in left else ""))
+    else:
+        params = ""
     rows = []
     for c in rep["candidates"]:
-        expl = "" if c["explained_fraction"] is None else f"{100 * c['explained_fraction']:.0f} %"
-        z = "" if c["z"] is None else f"{c['z']:.1f}"
+        cut = c.get("innovation_variance_cut")
+        expl = "" if cut is None else f"{100 * cut:.1f} %"
+        z = "" if c.get("held_out_t") is None else f"{c['held_out_t']:.1f}"
         pars = ", ".join(f"{k}={v:.4g}" for k, v in c["parameters"].items())
         cls = " class=win" if c["id"] == d.cause_id else ""
         star = " *" if c["refit_with_friction"] else ""
@@ -197,7 +280,7 @@ td:first-child{{text-align:left}}tr.win{{background:#dfd}}img{{max-width:100%}}<
 <p>{e(d.evidence)}</p>
 <p><b>Held-out runs:</b> {e(', '.join(d.held_out))} — {e(rep['split'])}.</p>
 <h3>Candidates (each mechanism fitted on the fit runs; * = refitted jointly with the baseline's friction correction)</h3>
-<table><tr><th>id</th><th>held-out RMSE [N·m]</th><th>fit RMSE</th><th>explains</th><th>z</th><th>parameters</th></tr>
+<table><tr><th>id</th><th>held-out RMSE [N·m]</th><th>fit RMSE</th><th>cuts the held-out innovation variance by</th><th>held-out t</th><th>parameters</th></tr>
 {rows}</table>
 <h3>Evidence</h3>{imgs}
 <p style="color:#777">Files: report.json, calibrated_model.yaml, extended_model.yaml.</p>

@@ -2,7 +2,9 @@
 extend the model and measure the gain on held-out runs."""
 from __future__ import annotations
 
+import json
 import sys
+from pathlib import Path
 
 from clutch_sim.cli import add_params_option
 from clutch_sim.commands._common import add_topic_options, load_runs
@@ -20,7 +22,8 @@ def add_parser(sub):
     p.add_argument("--out", required=True, metavar="DIR")
     add_params_option(p)
     p.add_argument("--held-out", nargs="+", metavar="RUN", default=None,
-                   help="run names to hold out (default: every third run from the second)")
+                   help="bags to hold out, whole ('BAG') or a time span in s from the bag's first message "
+                        "('BAG[t0:t1]') (default: every third run from the second, or time spans of few long runs)")
     p.add_argument("--candidates", nargs="+", metavar="ID", default=None,
                    help="mechanism ids to consider (default: the whole catalog)")
     p.add_argument("--mc-samples", type=int, default=200,
@@ -33,8 +36,9 @@ def add_parser(sub):
 def run(args) -> int:
     from clutch_model.formats.bench_csv import read_bench
     from clutch_model.diagnosis.calibration import car_calibration
-    from clutch_model.diagnosis.engine import choose_held_out, diagnose_campaign
-    from clutch_model.diagnosis.report import write_report
+    from clutch_model.diagnosis.engine import diagnose_campaign
+    from clutch_model.diagnosis.report import ProgressiveReport
+    from clutch_model.diagnosis.split import choose_split
     from clutch_model.errors import ParamsError
     from clutch_model.identification.friction_fit import fit_friction
     from clutch_model.plant.mechanisms import CATALOG
@@ -50,10 +54,10 @@ def run(args) -> int:
     bench = read_bench(args.bench)
     runs = load_runs(args, args.bags)
     names = [r.name for r in runs]
-    missing = sorted(set(args.held_out or []) - set(names))
+    split = choose_split(runs, args.held_out)   # checks the split before the slow work
+    missing = sorted({h.run for h in split.held_out} - set(names))
     if missing:
         raise ParamsError(f"held-out run not in the campaign: {missing[0]}")
-    choose_held_out(names)  # checks there is something to hold out, before the slow work
 
     def say(msg):
         print(f"diagnose: {msg}", file=sys.stderr, flush=True)
@@ -65,13 +69,15 @@ def run(args) -> int:
     def calibrate(model, fit_campaign):
         return car_calibration(model, fit_campaign, mc_samples=args.mc_samples, seed=args.seed, progress=say)
 
-    d = diagnose_campaign(nominal, bench_model, runs, held_out=args.held_out, candidates=args.candidates,
-                          calibrate=calibrate, progress=say,
-                          bench_info={"rmse": bench_fit.rmse, "rows": bench_fit.n_rows,
-                                      "active_constraints": [c.name for c in bench_fit.active_constraints]})
-    rep = write_report(d, args.out)
-    print(f"cause: {rep['cause']['id']}"
-          + (f" {rep['cause']['parameters']}" if rep["cause"]["parameters"] else ""))
+    writer = ProgressiveReport(args.out)      # each output written as soon as it is known
+    diagnose_campaign(nominal, bench_model, runs, held_out=args.held_out, candidates=args.candidates,
+                      calibrate=calibrate, progress=say, checkpoint=writer,
+                      bench_info={"rmse": bench_fit.rmse, "rows": bench_fit.n_rows,
+                                  "active_constraints": [c.name for c in bench_fit.active_constraints]})
+    rep = json.loads((Path(args.out) / "report.json").read_text())
+    for c in rep["causes"] or [rep["cause"]]:
+        print(f"cause: {c['id']}" + (f" {c['parameters']}" if c.get("parameters") else "")
+              + (f" 95 % {c['parameters_ci95']}" if c.get("parameters_ci95") else ""))
     r = rep["rmse_nm"]
     print(f"held-out RMSE [N*m]: nominal {r['nominal']:.2f}, calibrated {r['calibrated']:.2f}, "
           f"extended {r['extended']:.2f} (gain {rep['gain_pct']:.1f} %) on {', '.join(rep['held_out_runs'])}")

@@ -11,7 +11,7 @@ class TorqueSensorLag(Mechanism):
     physics = ("measured = first-order low-pass of the plant torque (time constant tau_s), "
                "started at each bag's first plant torque")
     virtual_car = VirtualCarRange(visible=(0.02, 0.2), default=0.06)
-    diagnosis_candidate = False    # not yet among diagnose's candidates
+    diagnosis_candidate = True
 
     @classmethod
     def search_space(cls, scale):

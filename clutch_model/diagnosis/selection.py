@@ -1,0 +1,387 @@
+"""Causes in sequence: forward selection with a held-out test at every step.
+
+Candidates are objects (catalog mechanisms, and later terms discovered from the data) with one
+method, ``fit(train) -> fitted`` (and optionally ``refine(fitted, train) -> fitted``, a costlier
+refit tried on the few candidates that fit the training rows best); a fitted candidate has ``parameters`` and
+``predict(data) -> predicted measured series on all rows`` (the model so far *with* the
+candidate added). Optionally ``sensitivity()`` (ParameterSensitivity) gives the Jacobian of
+the prediction for parameter intervals; without it, intervals come from a delete-a-group
+jackknife over runs or blocks (one refit per group).
+
+At each step every remaining candidate is fitted on the training rows on top of the model so
+far, and compared with it on the held-out rows (structure_test.compare_residuals: one-step
+predictions with each model's own AR noise, block-robust t). The best by held-out
+log-likelihood is named when it is significant; candidates it cannot be told apart from on the
+held-out rows are its lookalikes. Selection stops when no candidate is significant.
+
+The verdict:
+- ``named``: at least one cause, what remains after the named causes is indistinguishable
+  from noise (the flexible residual model of structure_test predicts nothing held-out), and
+  every lookalike of a named cause was either named as well (two causes) or beaten;
+- ``none``: nothing named and no structure the inputs predict;
+- ``unexplained``: structure is left (or a lookalike could not be beaten): the report gives
+  the closest candidate(s) and what they leave.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Callable, Protocol, Sequence
+
+import numpy as np
+
+from clutch_model.diagnosis.noise_model import DEFAULT_MAX_ORDER
+from clutch_model.diagnosis.structure_test import (ALPHA, BLOCK_S, MIN_GAIN_FRAC, PredictiveComparison,
+                                                   StructureResult, block_labels, compare_residuals,
+                                                   held_out_excess_test, per_run_structure_test,
+                                                   structure_test)
+
+LOOKALIKE_ALPHA = 0.01   # a runner-up is a lookalike unless the best beats it at this level (one-sided)
+MAX_CAUSES = 3
+
+
+@dataclass
+class SelectionData:
+    """The campaign as the selection sees it (all arrays over the same rows)."""
+
+    y: np.ndarray                 # measured series (NaN where not scored, e.g. locked rows)
+    t: np.ndarray
+    run_start: np.ndarray
+    train_mask: np.ndarray
+    test_mask: np.ndarray
+    features: np.ndarray | None = None    # input library for the remainder test (structure_test)
+    feature_names: list = field(default_factory=list)
+    per_run_features: np.ndarray | None = None   # columns with per-run coefficients (slip-angle ripple)
+    per_run_feature_names: list = field(default_factory=list)
+    groups: np.ndarray | None = None      # jackknife groups of training rows (run index); None: blocks
+    payload: object = None                # whatever the candidates need (the campaign, models, ...)
+
+
+@dataclass
+class TrainingSet:
+    """What a candidate is fitted on: the data (fit only where ``train_mask``) and the model
+    so far (``base``: the baseline, or the last named cause's fitted model)."""
+
+    data: SelectionData
+    base: object
+    selected: tuple = ()
+    train_mask: np.ndarray | None = None   # overrides data.train_mask (jackknife refits)
+
+    @property
+    def mask(self) -> np.ndarray:
+        return self.data.train_mask if self.train_mask is None else self.train_mask
+
+
+class Fitted(Protocol):
+    id: str
+    parameters: dict
+
+    def predict(self, data: SelectionData) -> np.ndarray: ...
+
+
+class Candidate(Protocol):
+    id: str
+
+    def fit(self, train: TrainingSet) -> Fitted: ...
+
+
+@dataclass
+class ParameterSensitivity:
+    """Jacobian of the predicted series with respect to the fitted parameters in their search
+    transform x (e.g. log tau); nuisance parameters (a friction correction) may be included,
+    and only ``names`` (the first len(names) columns) get intervals."""
+
+    names: list
+    x: np.ndarray
+    jacobian: np.ndarray            # rows x len(x)
+    from_x: Sequence[Callable]      # per named parameter: x -> physical value
+    estimator: str = "ols"          # how x was fitted: "ols" (plain least squares) or "gls" (AR-whitened)
+
+
+@dataclass
+class CandidateScore:
+    id: str
+    fitted: object
+    comparison: PredictiveComparison
+
+    @property
+    def significant(self) -> bool:
+        return self.comparison.significant()
+
+
+@dataclass
+class SelectionStep:
+    scores: list                    # CandidateScore, best first
+    chosen: str | None
+    lookalikes: list                # ids the chosen one could not be told apart from
+
+
+@dataclass
+class Cause:
+    id: str
+    fitted: object
+    parameters: dict
+    parameters_ci95: dict
+    comparison: PredictiveComparison      # against the model before it, held-out
+
+
+@dataclass
+class Selection:
+    verdict: str                    # named | none | unexplained
+    causes: list
+    steps: list
+    final: object                   # fitted model with every named cause (the baseline if none)
+    baseline_structure: StructureResult | None
+    remainder_structure: StructureResult | None
+    closest: list                   # unexplained: the closest candidate chain (ids)
+    closest_leaves: dict            # unexplained: what it leaves (held-out RMSE, structure)
+    reason: str
+
+    @property
+    def cause_ids(self) -> list:
+        return [c.id for c in self.causes]
+
+
+def _resid(data: SelectionData, fitted) -> np.ndarray:
+    return np.asarray(data.y, float) - np.asarray(fitted.predict(data), float)
+
+
+def _train_mse(data: SelectionData, fitted) -> float:
+    r = _resid(data, fitted)
+    ok = data.train_mask & np.isfinite(r)
+    return float(np.mean(r[ok] ** 2)) if ok.any() else math.inf
+
+
+def _compare(data, resid_null, resid_alt, max_order):
+    return compare_residuals(resid_null, resid_alt, data.train_mask, data.test_mask, data.run_start, data.t,
+                             max_order=max_order)
+
+
+def _remainder_test(data, resid, alpha, min_gain_frac, max_order):
+    """The flexible residual model, and the per-run one when there are per-run columns (each
+    at alpha / 2); the more significant result is returned."""
+    if data.features is None:
+        return None
+    tests = 3 if data.per_run_features is not None else 2
+    res = structure_test(resid, data.features, data.train_mask, data.test_mask, data.run_start, data.t,
+                         feature_names=data.feature_names, alpha=alpha / tests, min_gain_frac=min_gain_frac,
+                         max_order=max_order)
+    if data.per_run_features is not None:
+        per_run = per_run_structure_test(resid, data.per_run_features, data.train_mask, data.test_mask,
+                                         data.run_start, data.t, feature_names=data.per_run_feature_names,
+                                         alpha=alpha / tests, min_gain_frac=min_gain_frac, max_order=max_order)
+        if per_run.structured and not res.structured or per_run.comparison.t_stat > res.comparison.t_stat:
+            if per_run.structured or not res.structured:
+                res = per_run
+    if not res.structured:
+        # structure the training rows do not show: the held-out rows' noise is larger
+        excess = held_out_excess_test(resid, data.train_mask, data.test_mask, data.run_start, data.t,
+                                      alpha=alpha / tests, max_order=max_order)
+        if excess.structured:
+            res = excess
+    return res
+
+
+def select_causes(data: SelectionData, baseline, candidates: Sequence, alpha: float = ALPHA,
+                  min_gain_frac: float = MIN_GAIN_FRAC, lookalike_alpha: float = LOOKALIKE_ALPHA,
+                  max_causes: int = MAX_CAUSES, intervals: bool = True, max_order: int = DEFAULT_MAX_ORDER,
+                  refine_top: int = 3, structure_min_gain_frac: float | None = None,
+                  plain_gain: bool = False, progress=None) -> Selection:
+    """Forward selection of causes (see the module docstring). ``baseline`` is a fitted model
+    (``predict(data)``) without any candidate. ``min_gain_frac``: materiality of a candidate
+    (cut of the held-out innovation variance); ``structure_min_gain_frac``: of structure the
+    flexible residual model finds (default: the same); ``plain_gain``: a cause must also lower
+    the plain held-out RMSE."""
+    if structure_min_gain_frac is None:
+        structure_min_gain_frac = min_gain_frac
+    say = progress or (lambda msg: None)
+    current = baseline
+    resid_cur = _resid(data, current)
+    say("structure test of the baseline residual")
+    base_struct = _remainder_test(data, resid_cur, alpha, structure_min_gain_frac, max_order)
+    remaining = list(candidates)
+    named: list = []
+    steps: list = []
+    while remaining and len(named) < max_causes:
+        train = TrainingSet(data, current, tuple(c.id for c in named))
+        fits = {}
+        for cand in remaining:
+            say(f"fitting {cand.id}" + (f" on top of {', '.join(c.id for c in named)}" if named else ""))
+            fits[cand.id] = cand.fit(train)
+        # the best few on the training rows get a costlier refit (e.g. jointly with the friction)
+        by_train = sorted(remaining, key=lambda c: _train_mse(data, fits[c.id]))
+        for cand in by_train[:refine_top]:
+            if hasattr(cand, "refine"):
+                say(f"refining {cand.id}")
+                better = cand.refine(fits[cand.id], train)
+                if better is not None and _train_mse(data, better) <= _train_mse(data, fits[cand.id]):
+                    fits[cand.id] = better
+        scores = []
+        for cand in remaining:
+            cmp = _compare(data, resid_cur, _resid(data, fits[cand.id]), max_order)
+            scores.append(CandidateScore(cand.id, fits[cand.id], cmp))
+        scores.sort(key=lambda s: (not s.comparison.significant(alpha, min_gain_frac, plain_gain),
+                                   -s.comparison.delta_ll))
+        best = scores[0]
+        if not best.comparison.significant(alpha, min_gain_frac, plain_gain):
+            steps.append(SelectionStep(scores, None, []))
+            break
+        resid_best = _resid(data, best.fitted)
+        look = []
+        for other in scores[1:]:
+            if not other.comparison.significant(alpha, min_gain_frac, plain_gain):
+                continue
+            head = _compare(data, _resid(data, other.fitted), resid_best, max_order)
+            if not (head.p_value < lookalike_alpha and head.delta_ll > 0):
+                look.append(other.id)
+        steps.append(SelectionStep(scores, best.id, look))
+        named.append(Cause(best.id, best.fitted, dict(best.fitted.parameters), {}, best.comparison))
+        current = best.fitted
+        resid_cur = resid_best
+        remaining = [c for c in remaining if c.id != best.id]
+
+    say("structure test of what remains")
+    rem_struct = _remainder_test(data, resid_cur, alpha, structure_min_gain_frac, max_order) if named else base_struct
+    structured_left = bool(rem_struct is not None and rem_struct.structured)
+    named_ids = {c.id for c in named}
+    unresolved = sorted({lk for s in steps for lk in s.lookalikes if lk not in named_ids})
+
+    if intervals:
+        cand_by_id = {c.id: c for c in candidates}
+        for k, cause in enumerate(named):
+            say(f"95 % intervals of {cause.id}")
+            base_k = named[k - 1].fitted if k else baseline
+            cause.parameters_ci95 = parameter_ci95(cand_by_id[cause.id], cause.fitted, data, base_k,
+                                                   tuple(c.id for c in named[:k]), max_order=max_order)
+
+    def leaves(resid, struct):
+        rows = data.test_mask & np.isfinite(resid)
+        out = {"held_out_rmse": float(np.sqrt(np.mean(resid[rows] ** 2))) if rows.any() else math.nan}
+        if struct is not None:
+            out.update({"structure_t": struct.comparison.t_stat, "structure_p": struct.p_value,
+                        "structure_gain_frac": struct.gain_frac,
+                        "structure_follows": struct.top_features(3)})
+        return out
+
+    if named and not structured_left and not unresolved:
+        why = "; ".join(f"{c.id} (held-out t = {c.comparison.t_stat:.1f}, innovation variance -"
+                        f"{100 * c.comparison.gain_frac:.1f} %)" for c in named)
+        return Selection("named", named, steps, current, base_struct, rem_struct, [], {},
+                         f"named in order: {why}; what remains is indistinguishable from noise on held-out data")
+    if not named and not structured_left:
+        best = steps[0].scores[0] if steps and steps[0].scores else None
+        why = ("no candidate predicts the held-out residual better than the noise model"
+               + (f" (best {best.id}: t = {best.comparison.t_stat:.1f})" if best else "")
+               + " and the inputs predict nothing in it")
+        return Selection("none", [], steps, baseline, base_struct, rem_struct, [], {}, why)
+    # unexplained
+    if named:
+        closest = [c.id for c in named]
+        left = leaves(resid_cur, rem_struct)
+        if unresolved:
+            why = (f"{', '.join(closest)} cannot be told apart on held-out data from "
+                   f"{', '.join(unresolved)}")
+        else:
+            why = (f"after {', '.join(closest)} structure remains that the inputs predict "
+                   f"(held-out t = {rem_struct.comparison.t_stat:.1f}) and no candidate explains")
+        return Selection("unexplained", [], steps, baseline, base_struct, rem_struct, closest + unresolved, left,
+                         why)
+    best = steps[0].scores[0] if steps and steps[0].scores else None
+    closest = [best.id] if best else []
+    left = leaves(_resid(data, best.fitted), None) if best else {}
+    if rem_struct is not None:
+        left.update({"structure_t": rem_struct.comparison.t_stat, "structure_p": rem_struct.p_value,
+                     "structure_gain_frac": rem_struct.gain_frac,
+                     "structure_follows": rem_struct.top_features(3)})
+    why = (f"the inputs predict the held-out residual (t = {rem_struct.comparison.t_stat:.1f}) but no "
+           f"candidate does" + (f" (closest {best.id}: t = {best.comparison.t_stat:.1f})" if best else ""))
+    return Selection("unexplained", [], steps, baseline, base_struct, rem_struct, closest, left, why)
+
+
+# --- parameter intervals ------------------------------------------------------------------------
+
+def _clusters(data: SelectionData, mask: np.ndarray, block_s: float) -> np.ndarray:
+    """Cluster labels of the training rows for robust variances: whole runs when there are at
+    least MIN_RUN_CLUSTERS of them (slow drifts correlate a run's rows), else time blocks."""
+    if data.groups is not None:
+        g = np.where(mask, data.groups, -1)
+        uniq = np.unique(g[g >= 0])
+        if uniq.size >= MIN_RUN_CLUSTERS:
+            return np.where(g >= 0, np.searchsorted(uniq, g), -1)
+    return block_labels(data.t, mask, data.run_start, block_s)
+
+
+MIN_RUN_CLUSTERS = 6
+
+
+def _sandwich_ci(sens: ParameterSensitivity, resid, data: SelectionData, block_s: float):
+    """95 % intervals of a least-squares fit from the cluster-robust sandwich
+    (J'J)^-1 (sum_c J_c' r_c r_c' J_c) (J'J)^-1 over runs or blocks (coloured noise widens it),
+    with a t quantile on clusters - 1 degrees of freedom."""
+    from scipy import stats
+
+    J = np.asarray(sens.jacobian, float)
+    resid = np.asarray(resid, float)
+    mask = data.train_mask & np.isfinite(resid) & np.all(np.isfinite(J), axis=1)
+    if sens.estimator == "gls":      # the sandwich of the whitened regression
+        from clutch_model.diagnosis.noise_model import fit_noise_model, segments_of
+        from clutch_model.diagnosis.structure_test import _whiten_columns
+
+        nm = fit_noise_model(resid, data.run_start, mask)
+        segs = segments_of(np.where(mask, resid, np.nan), data.run_start)
+        resid = nm.innovations(np.where(mask, resid, np.nan), data.run_start)[0]
+        J = _whiten_columns(nm, J, segs)
+    lab = _clusters(data, mask, block_s)
+    ok = lab >= 0
+    J, r, lab = J[ok], resid[ok], lab[ok]
+    G = int(lab.max()) + 1
+    bread = J.T @ J
+    scores = np.zeros((G, J.shape[1]))
+    np.add.at(scores, lab, J * r[:, None])
+    meat = scores.T @ scores * G / max(G - 1, 1)
+    inv = np.linalg.pinv(bread)
+    cov = inv @ meat @ inv
+    q = float(stats.t.ppf(0.975, max(G - 1, 1)))
+    out = {}
+    for j, name in enumerate(sens.names):
+        half = q * math.sqrt(max(cov[j, j], 0.0))
+        lo, hi = sens.from_x[j](sens.x[j] - half), sens.from_x[j](sens.x[j] + half)
+        out[name] = [float(min(lo, hi)), float(max(lo, hi))]
+    return out
+
+
+def _jackknife_ci(candidate, fitted, data: SelectionData, base, selected, n_groups: int = 10):
+    """Delete-a-group jackknife: refit with each group of training rows left out."""
+    from scipy import stats
+
+    train = data.train_mask & np.isfinite(data.y)
+    gid = _clusters(data, train, BLOCK_S)
+    if data.groups is None or np.unique(gid[gid >= 0]).size > n_groups:   # blocks: pool into n_groups
+        nb = int(gid.max()) + 1
+        gid = np.where(gid >= 0, gid * n_groups // max(nb, 1), -1)
+    uniq = np.unique(gid[gid >= 0])
+    names = [k for k, v in fitted.parameters.items() if isinstance(v, (int, float))]
+    est = {k: [] for k in names}
+    for g in uniq:
+        sub = candidate.fit(TrainingSet(data, base, selected, train_mask=train & (gid != g)))
+        for k in names:
+            est[k].append(float(sub.parameters[k]))
+    G = uniq.size
+    out = {}
+    for k in names:
+        v = np.array(est[k])
+        se = math.sqrt((G - 1) / G * float(np.sum((v - v.mean()) ** 2)))
+        c = float(fitted.parameters[k])
+        q = float(stats.t.ppf(0.975, max(G - 1, 1)))
+        out[k] = [c - q * se, c + q * se]
+    return out
+
+
+def parameter_ci95(candidate, fitted, data: SelectionData, base, selected=(), max_order: int = DEFAULT_MAX_ORDER,
+                   block_s: float = BLOCK_S) -> dict:
+    """95 % intervals of a fitted candidate's parameters: a block-robust sandwich on whitened
+    data when the fitted candidate gives its sensitivity, else a jackknife over runs/blocks."""
+    sens = fitted.sensitivity() if hasattr(fitted, "sensitivity") else None
+    if sens is not None:
+        return _sandwich_ci(sens, _resid(data, fitted), data, block_s)
+    return _jackknife_ci(candidate, fitted, data, base, selected)

@@ -1,0 +1,156 @@
+"""Which data is fitted and which is held out, for any campaign shape.
+
+Many runs: whole runs are held out (every third from the second, in log-time order, moved off
+the runs that hold an extreme of the campaign's slip or sump temperature, so validation stays
+inside the fit runs' operating envelope). Few runs (one long drive, two bags): time spans are
+held out instead, every third span of each run from the second. Either way the simulation runs
+through every bag from its start (state carried through the spans); only the rows that are
+scored differ. A short guard after each change between fitted and held-out rows is scored by
+neither, so the noise model's history does not leak fitted rows into the held-out score.
+
+Spans are named for report.json as "<bag>" (a whole run) or "<bag>[t0:t1]" (seconds from the
+bag's first message).
+"""
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass
+
+import numpy as np
+
+from clutch_model.errors import DataError
+
+MIN_RUNS_WHOLE = 3         # hold out whole runs from this many runs on
+TARGET_SPANS = 12          # a run campaign split into spans: about this many spans in all
+MIN_SPAN_S, MAX_SPAN_S = 2.0, 60.0
+GUARD_S = 0.25
+
+
+@dataclass(frozen=True)
+class HeldOut:
+    """A held-out run (t0 = t1 = None) or a time span [t0, t1) of it (s from the bag start)."""
+
+    run: str
+    t0: float | None = None
+    t1: float | None = None
+
+    @property
+    def whole_run(self) -> bool:
+        return self.t0 is None
+
+    @property
+    def label(self) -> str:
+        if self.whole_run:
+            return self.run
+        return f"{self.run}[{_fmt(self.t0)}:{_fmt(self.t1)}]"
+
+
+def _fmt(x: float) -> str:
+    return f"{round(float(x), 3):g}"
+
+
+_LABEL = re.compile(r"^(?P<run>.*)\[(?P<t0>[-+0-9.eE]+):(?P<t1>[-+0-9.eE]+)\]$")
+
+
+def parse_held_out(label: str) -> HeldOut:
+    """"bag" or "bag[t0:t1]" -> HeldOut."""
+    m = _LABEL.match(label)
+    if not m:
+        return HeldOut(label)
+    t0, t1 = float(m["t0"]), float(m["t1"])
+    if not t1 > t0:
+        raise DataError(f"held-out span {label!r}: the end must be after the start")
+    return HeldOut(m["run"], t0, t1)
+
+
+@dataclass
+class Split:
+    held_out: list                 # HeldOut
+    guard_s: float = GUARD_S
+    how: str = ""
+
+    @property
+    def labels(self) -> list:
+        return [h.label for h in self.held_out]
+
+    def masks(self, names: list, run_index: np.ndarray, t: np.ndarray):
+        """-> (fit_mask, eval_mask) over the campaign's rows (t in s from each bag's start)."""
+        unknown = {h.run for h in self.held_out} - set(names)
+        if unknown:
+            raise DataError(f"held-out run not in the campaign: {sorted(unknown)[0]}")
+        t = np.asarray(t, float)
+        held = np.zeros(t.size, bool)
+        for h in self.held_out:
+            rows = run_index == names.index(h.run)
+            if not h.whole_run:
+                rows &= (t >= h.t0) & (t < h.t1)
+            held |= rows
+        guard = np.zeros(t.size, bool)
+        if self.guard_s > 0:
+            for j in np.unique(run_index):
+                idx = np.flatnonzero(run_index == j)
+                hj = held[idx]
+                changes = np.flatnonzero(hj[1:] != hj[:-1]) + 1
+                for c in changes:
+                    tc = t[idx[c]]
+                    guard[idx[(t[idx] >= tc) & (t[idx] < tc + self.guard_s)]] = True
+        eval_mask = held & ~guard
+        fit_mask = ~held & ~guard
+        if not eval_mask.any():
+            raise DataError("the held-out data is empty")
+        if not fit_mask.any():
+            raise DataError("every run is held out: nothing left to fit on")
+        return fit_mask, eval_mask
+
+    def fit_runs(self, names: list) -> list:
+        whole = {h.run for h in self.held_out if h.whole_run}
+        return [n for n in names if n not in whole]
+
+
+def _whole_run_picks(runs) -> list:
+    n = len(runs)
+    picks = [n // 2] if n == 3 else list(range(1, n, 3))
+    if n >= 4:
+        slip = np.array([float(np.mean(np.abs(r.slip_speed_rad_s))) for r in runs])
+        sump = np.array([float(np.mean(r.sump_temperature_c)) for r in runs])
+        extreme = {int(np.argmax(slip)), int(np.argmin(slip)), int(np.argmax(sump)), int(np.argmin(sump))}
+        chosen = set()
+        for k in picks:
+            if k in extreme:
+                for j in (k + 1, k - 1, k + 2, k - 2):
+                    if 0 <= j < n and j not in extreme and j not in chosen and j not in picks:
+                        k = j
+                        break
+            chosen.add(k)
+        picks = sorted(chosen)
+    return picks
+
+
+def choose_split(runs, held_out=None, min_runs_whole: int = MIN_RUNS_WHOLE, guard_s: float = GUARD_S) -> Split:
+    """The split of a campaign (runs in log-time order, each with .name, .t, .slip_speed_rad_s,
+    .sump_temperature_c). ``held_out``: labels given by the user ("bag" or "bag[t0:t1]")."""
+    runs = list(runs)
+    if not runs:
+        raise DataError("no runs")
+    if held_out:
+        return Split([parse_held_out(str(h)) for h in held_out], guard_s, "given")
+    if len(runs) >= min_runs_whole:
+        picks = _whole_run_picks(runs)
+        return Split([HeldOut(runs[k].name) for k in picks], guard_s,
+                     "whole runs: every third from the second in log-time order, moved off the runs with the "
+                     "campaign's extreme slip or sump temperature")
+    total = sum(max(r.duration_s, 0.0) for r in runs)
+    span = min(max(total / TARGET_SPANS, MIN_SPAN_S), MAX_SPAN_S)
+    held = []
+    for r in runs:
+        t_end = float(r.t[-1]) if len(r) else 0.0
+        n_spans = max(int(math.floor(t_end / span)), 1)
+        width = t_end / n_spans
+        edges = [round(j * width, 3) for j in range(n_spans)] + [math.floor(t_end * 1000.0 + 1.0) / 1000.0]
+        held += [HeldOut(r.name, edges[j], edges[j + 1]) for j in range(1, n_spans, 3)]
+    if not held:
+        raise DataError("the runs are too short to hold out a time span "
+                        f"(need at least {2 * MIN_SPAN_S:g} s of data)")
+    return Split(held, guard_s, f"time spans of {span:.3g} s: every third span of each run from the second "
+                                "(the simulation runs through whole bags; only the scoring differs)")

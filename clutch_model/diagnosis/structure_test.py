@@ -1,0 +1,512 @@
+"""Is there structure in a residual? Decided by held-out prediction, not by a noise floor.
+
+A residual (measured - predicted torque) holds structure when something fitted on the
+training rows predicts it on held-out rows better than a noise model does. "Better" is
+measured the way a forecaster is judged:
+
+- each model under comparison is a predictor of the held-out residual *plus* an AR noise
+  model (noise_model.py), fitted on the training rows of the alternative's residual (the noise
+  as the alternative sees it; the null's own residual would teach the AR to forecast a smooth
+  or periodic misfit from its own past). Its one-step prediction of row t uses the inputs (the
+  candidate's predicted change in torque) and the residual's own past, and its Gaussian
+  log-likelihood scores the prediction;
+- the null model is the noise model alone, fitted to the data: coloured noise (AR(1) with
+  phi = 0.95, a 10 Hz sensor filter, values held at 10 Hz, a median filter, slow drift) is
+  predictable from its own past, so the null already gets that credit and coloured noise is
+  not structure;
+- the alternative is a candidate's correction, or a flexible residual model driven by the
+  inputs (ridge regression on a library of input signals, fitted by generalised least squares
+  with the null's AR whitening, so a slow drift is not regressed onto a slow temperature);
+- the comparison is a Diebold-Mariano test on the held-out log-likelihood difference with the
+  variance from sums over blocks of BLOCK_S seconds (batch means): autocorrelation left in
+  the scores, and heavy-tailed innovations (held values), widen the interval instead of
+  inflating the significance. The test is one-sided with B - 1 degrees of freedom.
+
+Everything is in sample order (the measured torque's own stamps); `t` only cuts blocks.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import stats
+from scipy.signal import lfilter
+
+from clutch_model.diagnosis.noise_model import DEFAULT_MAX_ORDER, NoiseModel, fit_noise_model, segments_of
+
+BLOCK_S = 1.0
+MIN_BLOCK_ROWS = 20
+ALPHA = 1e-3            # one-sided level of a single held-out test
+MIN_GAIN_FRAC = 0.005   # materiality: the alternative must cut the held-out innovation variance by 0.5 %
+
+
+@dataclass
+class PredictiveComparison:
+    """Held-out comparison of an alternative predictor against a null one (both with AR noise)."""
+
+    delta_ll: float            # total held-out log-likelihood gain of the alternative, nats
+    t_stat: float              # block-robust matched-filter t of the held-out improvement
+    p_value: float             # one-sided
+    n_blocks: int
+    n_rows: int
+    gain_frac: float           # 1 - held-out innovation MSE (alt) / innovation MSE (null)
+    rmse_null: float           # plain held-out RMSE of the residuals (no noise model)
+    rmse_alt: float
+    noise_null: NoiseModel | None = field(default=None, repr=False)
+    noise_alt: NoiseModel | None = field(default=None, repr=False)
+    block_gain: np.ndarray | None = field(default=None, repr=False)   # per-block delta_ll
+
+    def significant(self, alpha: float = ALPHA, min_gain_frac: float = MIN_GAIN_FRAC,
+                    plain_gain: bool = False) -> bool:
+        """plain_gain: also require the plain held-out RMSE to fall (the gain a report shows)."""
+        return bool(self.p_value < alpha and self.gain_frac > min_gain_frac and self.delta_ll > 0
+                    and (not plain_gain or self.rmse_alt < self.rmse_null))
+
+    @property
+    def z(self) -> float:
+        """The one-sided p-value as a standard-normal z (for reports)."""
+        return float(stats.norm.isf(min(max(self.p_value, 1e-300), 1.0)))
+
+
+@dataclass
+class StructureResult:
+    """Answer to 'is there structure in this residual that the inputs predict?'."""
+
+    structured: bool
+    comparison: PredictiveComparison
+    coefficients: np.ndarray = field(repr=False, default=None)
+    feature_names: list = field(default_factory=list)
+    prediction: np.ndarray | None = field(default=None, repr=False)   # fitted correction, all rows
+
+    @property
+    def p_value(self) -> float:
+        return self.comparison.p_value
+
+    @property
+    def gain_frac(self) -> float:
+        return self.comparison.gain_frac
+
+    def top_features(self, k: int = 3) -> list:
+        """The library columns carrying most of the fitted correction (name, share)."""
+        if self.coefficients is None or not self.feature_names:
+            return []
+        w = np.abs(self.coefficients)
+        tot = float(w.sum()) or 1.0
+        order = np.argsort(-w)[:k]
+        return [(self.feature_names[j], float(w[j] / tot)) for j in order]
+
+
+def block_labels(t: np.ndarray, mask: np.ndarray, run_start: np.ndarray, block_s: float = BLOCK_S,
+                 min_rows: int = MIN_BLOCK_ROWS) -> np.ndarray:
+    """Labels 0..B-1 for the rows in mask (-1 elsewhere): consecutive windows of block_s seconds
+    within each contiguous stretch of masked rows of a run; a window with fewer than min_rows
+    rows joins its predecessor in the stretch."""
+    t = np.asarray(t, float)
+    lab = np.full(t.size, -1, dtype=np.int64)
+    nxt = 0
+    for a, b in segments_of(np.where(mask, 0.0, np.nan), run_start):
+        tb = np.floor((t[a:b] - t[a]) / block_s).astype(np.int64)
+        _, inv, counts = np.unique(tb, return_inverse=True, return_counts=True)
+        merged = np.empty(counts.size, dtype=np.int64)
+        g, acc = 0, 0
+        for j in range(counts.size):
+            if acc >= min_rows:
+                g, acc = g + 1, 0
+            merged[j] = g
+            acc += counts[j]
+        if acc < min_rows and g > 0:       # short tail joins its predecessor
+            merged[merged == g] = g - 1
+        lab[a:b] = nxt + merged[inv]
+        nxt += int(merged.max()) + 1
+    return lab
+
+
+def _own_noise(resid, train_mask, run_start, max_order):
+    ok = train_mask & np.isfinite(resid)
+    return fit_noise_model(resid, run_start, ok, max_order=max_order)
+
+
+def compare_residuals(resid_null: np.ndarray, resid_alt: np.ndarray, train_mask: np.ndarray,
+                      test_mask: np.ndarray, run_start: np.ndarray, t: np.ndarray, block_s: float = BLOCK_S,
+                      max_order: int = DEFAULT_MAX_ORDER, noise_null: NoiseModel | None = None) -> PredictiveComparison:
+    """Held-out predictive comparison of two residual series (measured - predicted), each with
+    its own AR noise model fitted on the training rows. Rows where either residual is NaN are
+    dropped (and break the AR history)."""
+    resid_null = np.asarray(resid_null, float)
+    resid_alt = np.asarray(resid_alt, float)
+    both = np.isfinite(resid_null) & np.isfinite(resid_alt)
+    rn = np.where(both, resid_null, np.nan)
+    ra = np.where(both, resid_alt, np.nan)
+    # one noise model for both, fitted to the alternative's residual on the training rows (the
+    # noise covariance estimated under the alternative, as a Wald test does): under the null the
+    # two residuals are the same noise; under the alternative the null's residual carries the
+    # structure, which a noise model fitted to it would otherwise learn to forecast from its
+    # own past (a smooth or periodic misfit is predictable one step ahead).
+    nm_alt = _own_noise(ra, train_mask, run_start, max_order)
+    nm_null = noise_null or nm_alt
+    en, vn = nm_null.innovations(rn, run_start)
+    ea, va = nm_alt.innovations(ra, run_start)
+    lln = -0.5 * (np.log(vn) + en * en / vn)
+    lla = -0.5 * (np.log(va) + ea * ea / va)
+    rows = test_mask & both
+    d = np.where(rows, lla - lln, 0.0)
+    lab = block_labels(t, rows, run_start, block_s)
+    nb = int(lab.max()) + 1 if (lab >= 0).any() else 0
+    sums = np.bincount(lab[lab >= 0], weights=d[lab >= 0], minlength=nb) if nb else np.zeros(0)
+    n_rows = int(rows.sum())
+    delta = float(sums.sum())
+    # matched-filter statistic of the improvement g = e_null - e_alt of the one-step errors
+    # (both scaled by the null's predicted sd): S = sum e_null g = sum e_alt g + sum g^2. Its
+    # variance comes from the block sums of e_alt g, which have mean zero when the alternative
+    # is right and are inflated when it is not (a conservative test under the null), and do
+    # not carry the signal's own block-to-block spread as a DM t on the log-likelihood would.
+    sn = np.sqrt(vn)
+    zn = np.where(rows, en / sn, 0.0)
+    za = np.where(rows, ea / sn, 0.0)
+    g = zn - za
+    good = lab >= 0
+    S = np.bincount(lab[good], weights=(zn * g)[good], minlength=nb) if nb else np.zeros(0)
+    U = np.bincount(lab[good], weights=(za * g)[good], minlength=nb) if nb else np.zeros(0)
+    denom = float(np.sqrt(np.sum(U * U)))
+    if nb >= 3 and denom > 0:
+        tstat = float(S.sum() / denom)
+        p = float(stats.t.sf(tstat, nb - 1))
+    elif nb >= 3 and S.sum() > 0:
+        tstat, p = math.inf, 0.0
+    else:
+        tstat, p = 0.0, 1.0
+    mse_n = float(np.mean(en[rows] ** 2)) if n_rows else math.nan
+    mse_a = float(np.mean(ea[rows] ** 2)) if n_rows else math.nan
+    gain = 1.0 - mse_a / mse_n if n_rows and mse_n > 0 else 0.0
+    rmse_n = float(np.sqrt(np.mean(rn[rows] ** 2))) if n_rows else math.nan
+    rmse_a = float(np.sqrt(np.mean(ra[rows] ** 2))) if n_rows else math.nan
+    return PredictiveComparison(delta_ll=delta, t_stat=float(tstat), p_value=p, n_blocks=nb, n_rows=n_rows,
+                                gain_frac=gain, rmse_null=rmse_n, rmse_alt=rmse_a, noise_null=nm_null,
+                                noise_alt=nm_alt, block_gain=sums)
+
+
+def candidate_test(residual: np.ndarray, correction: np.ndarray, train_mask, test_mask, run_start, t,
+                   **kw) -> PredictiveComparison:
+    """Does a candidate's predicted change in torque (``correction``, fitted on the training rows)
+    predict the held-out residual better than the noise model alone?"""
+    residual = np.asarray(residual, float)
+    return compare_residuals(residual, residual - np.asarray(correction, float), train_mask, test_mask,
+                             run_start, t, **kw)
+
+
+# --- the flexible residual model: ridge on a library of input signals ---------------------------
+
+def _whiten_columns(model: NoiseModel, X: np.ndarray, segments: list) -> np.ndarray:
+    out = np.empty_like(X)
+    p = model.order
+    for a, b in segments:
+        seg = X[a:b]
+        out[a:b] = lfilter(model.a, [1.0], seg, axis=0)
+        for k in range(min(p, b - a)):
+            ak = model.lattice[k]
+            out[a + k] = ak @ seg[k::-1][:ak.size]
+    return out
+
+
+def _ridge_gcv(Xw: np.ndarray, yw: np.ndarray, lambdas=None):
+    """Ridge coefficients on standardised columns, penalty by generalised cross-validation
+    (the constant column, if any, is penalised like the rest; columns are pre-scaled)."""
+    # thin SVD through the normal matrix (k x k): X = U S V', U'y = S^-1 V' X'y
+    ev, V = np.linalg.eigh(Xw.T @ Xw)
+    ev = np.maximum(ev, 0.0)
+    s = np.sqrt(ev)
+    Vt = V.T
+    xty = Xw.T @ yw
+    uty = np.where(s > 1e-12 * max(s.max(), 1e-300), (Vt @ xty) / np.where(s > 0, s, 1.0), 0.0)
+    n = yw.size
+    rss0 = float(yw @ yw - uty @ uty)
+    best = None
+    lambdas = lambdas if lambdas is not None else np.geomspace(1e-3, 1e4, 15) * n / max(Xw.shape[1], 1) * 1e-3
+    for lam in lambdas:
+        f = s * s / (s * s + lam)
+        rss = rss0 + float(np.sum(((1 - f) * uty) ** 2))
+        dof = float(f.sum())
+        gcv = rss / max(n - dof, 1.0) ** 2
+        if best is None or gcv < best[0]:
+            best = (gcv, lam)
+    lam = best[1]
+    beta = Vt.T @ (s / (s * s + lam) * uty)
+    return beta, lam
+
+
+def _ridge_grouped_cv(Xw: np.ndarray, yw: np.ndarray, groups: np.ndarray, lambdas=None):
+    """Ridge penalty by grouped cross-validation (leave one group of rows out: a run, or a
+    contiguous chunk of a long run), from per-group Gram matrices: the flexible model must
+    predict runs it was not fitted on, so a library column that only extrapolates (a slip^2
+    fitted inside the fit runs' range) is shrunk rather than trusted."""
+    k = Xw.shape[1]
+    uniq = np.unique(groups)
+    if uniq.size < 3:
+        return _ridge_gcv(Xw, yw, lambdas)
+    G = np.zeros((uniq.size, k, k))
+    h = np.zeros((uniq.size, k))
+    yy = np.zeros(uniq.size)
+    for j, g in enumerate(uniq):
+        sel = groups == g
+        A = Xw[sel]
+        G[j] = A.T @ A
+        h[j] = A.T @ yw[sel]
+        yy[j] = float(yw[sel] @ yw[sel])
+    Gt, ht = G.sum(axis=0), h.sum(axis=0)
+    scale = float(np.trace(Gt)) / k
+    lambdas = lambdas if lambdas is not None else scale * np.geomspace(1e-7, 10.0, 17)
+    best = None
+    for lam in lambdas:
+        err = 0.0
+        for j in range(uniq.size):
+            beta = np.linalg.solve(Gt - G[j] + lam * np.eye(k), ht - h[j])
+            err += yy[j] - 2 * beta @ h[j] + beta @ G[j] @ beta
+        if best is None or err < best[0]:
+            best = (err, lam)
+    lam = best[1]
+    return np.linalg.solve(Gt + lam * np.eye(k), ht), lam
+
+
+def _cv_groups(rows: np.ndarray, run_start: np.ndarray, n_chunks: int = 5) -> np.ndarray:
+    """Group labels of the given rows: runs, or n_chunks contiguous chunks when fewer than 3
+    runs have rows."""
+    run_id = (np.cumsum(run_start) - 1)[rows]
+    if np.unique(run_id).size >= 3:
+        return run_id
+    return np.arange(rows.size) * n_chunks // max(rows.size, 1)
+
+
+def fit_flexible(residual: np.ndarray, X: np.ndarray, train_mask: np.ndarray, run_start: np.ndarray,
+                 iterations: int = 2, max_order: int = DEFAULT_MAX_ORDER, ridge: bool = True):
+    """Ridge regression of the residual on the feature columns X, by feasible GLS: the AR noise
+    model of what is left is refitted and the regression redone on whitened data
+    (Cochrane-Orcutt), so coloured noise does not pass for a slow input. -> (beta on the
+    original columns, prediction on all rows, noise model of the remainder)."""
+    r = np.asarray(residual, float)
+    X = np.asarray(X, float)
+    ok = train_mask & np.isfinite(r) & np.all(np.isfinite(X), axis=1)
+    scale = np.sqrt(np.mean(X[ok] ** 2, axis=0))
+    scale = np.where(scale > 0, scale, 1.0)
+    Xs = X / scale
+    segs = segments_of(np.where(ok, r, np.nan), run_start)
+    rows = np.concatenate([np.arange(a, b) for a, b in segs]) if segs else np.zeros(0, int)
+    beta = np.zeros(X.shape[1])
+    nm = fit_noise_model(r, run_start, ok, max_order=max_order)
+    for _ in range(max(1, iterations)):
+        yw = nm.innovations(np.where(ok, r, np.nan), run_start)[0][rows]
+        Xw = _whiten_columns(nm, Xs, segs)[rows]
+        if ridge:
+            beta, _ = _ridge_grouped_cv(Xw, yw, _cv_groups(rows, run_start))
+        else:
+            beta = np.linalg.lstsq(Xw, yw, rcond=None)[0]
+        rem = r - Xs @ beta
+        nm = fit_noise_model(rem, run_start, ok, max_order=max_order)
+    pred = np.where(np.all(np.isfinite(X), axis=1), Xs @ beta, 0.0)
+    return beta / scale, pred, nm
+
+
+def fit_flexible_ols(residual: np.ndarray, X: np.ndarray, train_mask: np.ndarray, run_start: np.ndarray):
+    """Ridge regression of the residual on X by plain least squares, penalty by grouped
+    cross-validation over runs (or chunks of a long run). Used for the structure test: a noise
+    model fitted to a structured residual absorbs slow structure, and a regression whitened
+    with it learns only the structure's fast edges (and extrapolates its level wildly); the
+    held-out test, with its own whitening, keeps coloured noise from passing for structure.
+    -> (beta on the original columns, prediction on all rows)."""
+    r = np.asarray(residual, float)
+    X = np.asarray(X, float)
+    ok = train_mask & np.isfinite(r) & np.all(np.isfinite(X), axis=1)
+    scale = np.sqrt(np.mean(X[ok] ** 2, axis=0))
+    scale = np.where(scale > 0, scale, 1.0)
+    Xs = X / scale
+    rows = np.flatnonzero(ok)
+    beta, _ = _ridge_grouped_cv(Xs[rows], r[rows], _cv_groups(rows, run_start))
+    pred = np.where(np.all(np.isfinite(X), axis=1), Xs @ beta, 0.0)
+    return beta / scale, pred
+
+
+def gls_fit(residual: np.ndarray, X: np.ndarray, train_mask: np.ndarray, run_start: np.ndarray,
+            max_order: int = DEFAULT_MAX_ORDER):
+    """Least squares of the residual on the columns of X with the residual's own AR noise
+    (feasible GLS, two Cochrane-Orcutt passes; no penalty). -> (beta, noise model). The
+    efficient fit of a linear-in-parameter candidate under coloured noise: plain least squares
+    under a slow drift leaves an estimation error that a held-out test would rightly find."""
+    beta, _, nm = fit_flexible(residual, np.asarray(X, float).reshape(np.asarray(residual).size, -1),
+                               train_mask, run_start, max_order=max_order, ridge=False)
+    return beta, nm
+
+
+def structure_test(residual: np.ndarray, X: np.ndarray, train_mask, test_mask, run_start, t,
+                   feature_names=None, alpha: float = ALPHA, min_gain_frac: float = MIN_GAIN_FRAC,
+                   block_s: float = BLOCK_S, max_order: int = DEFAULT_MAX_ORDER) -> StructureResult:
+    """Is there structure the inputs predict? A ridge model of the residual on the feature
+    library X (columns = input signals, see input_features), fitted on the training rows, must
+    beat the noise model on the held-out rows (compare_residuals)."""
+    residual = np.asarray(residual, float)
+    # two fits, each tested at alpha / 2: plain least squares (a structure whose level a noise
+    # model fitted to the residual would absorb) and feasible GLS (efficient under coloured
+    # noise, e.g. a drift)
+    best = None
+    for fit in ("ols", "gls"):
+        if fit == "ols":
+            beta, pred = fit_flexible_ols(residual, X, train_mask, run_start)
+        else:
+            beta, pred, _ = fit_flexible(residual, X, train_mask, run_start, max_order=max_order)
+        cmp = candidate_test(residual, pred, train_mask, test_mask, run_start, t, block_s=block_s,
+                             max_order=max_order)
+        res = StructureResult(structured=cmp.significant(alpha / 2, min_gain_frac), comparison=cmp,
+                              coefficients=beta, feature_names=list(feature_names or []), prediction=pred)
+        if best is None or (res.structured, cmp.t_stat) > (best.structured, best.comparison.t_stat):
+            best = res
+    return best
+
+
+def _lowpass(x, t, run_start, tau_s):
+    """First-order low-pass per run (exact for samples held between stamps)."""
+    out = np.empty_like(x)
+    for a, b in segments_of(np.zeros_like(x), run_start):
+        y = x[a]
+        out[a] = y
+        dt = np.diff(t[a:b])
+        alpha = 1.0 - np.exp(-np.maximum(dt, 0.0) / tau_s)
+        for k in range(1, b - a):
+            y = y + alpha[k - 1] * (x[a + k - 1] - y)
+            out[a + k] = y
+    return out
+
+
+def input_features(signals: dict, t: np.ndarray, run_start: np.ndarray, torque: np.ndarray | None = None,
+                   lags_s=(0.03, 0.3)):
+    """A library of input-driven columns for the flexible residual model -> (names, X).
+
+    For each signal s (standardised): s and s^2 (additive effects), and torque * s (effects
+    that scale the friction, the way most clutch effects enter); a constant (an offset); and,
+    for each lag time constant, first-order low-passed torque and force minus the signal
+    itself (dynamics on the force or torque path)."""
+    names, cols = ["constant"], [np.ones(np.asarray(t).size)]
+    tq = None
+    if torque is not None:
+        torque = np.asarray(torque, float)
+        tq = torque / (np.std(torque) or 1.0)
+        names.append("torque")
+        cols.append(tq)
+    for name, s in signals.items():
+        s = np.asarray(s, float)
+        z = (s - np.mean(s)) / (np.std(s) or 1.0)
+        names += [name, f"{name}^2"]
+        cols += [z, z * z]
+        if tq is not None:
+            names.append(f"torque x {name}")
+            cols.append(tq * z)
+    for tau in lags_s:
+        if tq is not None:
+            names.append(f"torque low-pass {tau:g} s - torque")
+            cols.append(_lowpass(tq, t, run_start, tau) - tq)
+        if "force" in signals:
+            f = np.asarray(signals["force"], float)
+            f = f / (np.std(f) or 1.0)
+            names.append(f"force low-pass {tau:g} s - force")
+            cols.append(_lowpass(f, t, run_start, tau) - f)
+    return names, np.column_stack(cols)
+
+
+def _cross_fit_per_run(r, Xs, rows_all, lab, run_id, run_start, nm):
+    """Each block of each run predicted from a GLS fit of Xs on the run's other blocks."""
+    corr = np.zeros(r.size)
+    p = nm.order
+    for j in np.unique(run_id[rows_all]):
+        rows_j = rows_all & (run_id == j)
+        segs = segments_of(np.where(rows_j, r, np.nan), run_start)
+        ew = nm.innovations(np.where(rows_j, r, np.nan), run_start)[0]
+        Xw = _whiten_columns(nm, Xs, segs)
+        blocks_j = np.unique(lab[rows_j])
+        if blocks_j.size < 3:
+            continue
+        for b in blocks_j:
+            inb = rows_j & (lab == b)
+            idx = np.flatnonzero(inb)
+            reach = np.zeros(r.size, bool)
+            reach[idx[-1] + 1:min(idx[-1] + 1 + p, r.size)] = True   # history inside block b
+            fit = rows_j & ~inb & ~reach & np.isfinite(ew)
+            A = Xw[fit]
+            lam = 1e-6 * float(np.trace(A.T @ A)) / max(A.shape[1], 1) + 1e-12
+            beta = np.linalg.solve(A.T @ A + lam * np.eye(A.shape[1]), A.T @ ew[fit])
+            corr[inb] = Xs[inb] @ beta
+    return corr
+
+
+def per_run_structure_test(residual: np.ndarray, X: np.ndarray, train_mask, test_mask, run_start, t,
+                           feature_names=None, alpha: float = ALPHA, min_gain_frac: float = MIN_GAIN_FRAC,
+                           block_s: float = BLOCK_S, max_order: int = DEFAULT_MAX_ORDER) -> StructureResult:
+    """Structure the inputs predict up to per-run coefficients (a once-per-revolution ripple
+    whose phase differs from run to run: sin and cos of the slip angle, with coefficients of
+    each run's own). Within each run, each block is predicted from a GLS fit of the
+    columns X on that run's *other* blocks (cross-fitting; rows whose AR history reaches into
+    the predicted block are left out of its fit), and the correction is then tested like any
+    candidate against the noise model fitted on the training rows."""
+    r = np.asarray(residual, float)
+    X = np.asarray(X, float)
+    ok_train = train_mask & np.isfinite(r)
+    # every run is cross-fitted (the training runs too, so the noise model is fitted to what
+    # the per-run model leaves there), twice: the second pass whitens with that noise model
+    rows_all = (train_mask | test_mask) & np.isfinite(r) & np.all(np.isfinite(X), axis=1)
+    scale = np.sqrt(np.mean(X[rows_all] ** 2, axis=0)) if rows_all.any() else np.ones(X.shape[1])
+    Xs = X / np.where(scale > 0, scale, 1.0)
+    lab = block_labels(t, rows_all, run_start, block_s)
+    run_id = np.cumsum(run_start) - 1
+    nm = fit_noise_model(r, run_start, ok_train, max_order=max_order)
+    corr = np.zeros(r.size)
+    for _ in range(2):
+        corr = _cross_fit_per_run(r, Xs, rows_all, lab, run_id, run_start, nm)
+        nm = fit_noise_model(r - corr, run_start, ok_train, max_order=max_order)
+    cmp = candidate_test(r, corr, train_mask, test_mask, run_start, t, block_s=block_s, max_order=max_order)
+    return StructureResult(structured=cmp.significant(alpha, min_gain_frac), comparison=cmp, coefficients=None,
+                           feature_names=list(feature_names or []), prediction=corr)
+
+
+MIN_EXCESS = 0.12       # held-out innovation variance above the training one, materiality
+
+
+def held_out_excess_test(residual: np.ndarray, train_mask, test_mask, run_start, t, alpha: float = ALPHA,
+                         min_excess: float = MIN_EXCESS, block_s: float = BLOCK_S,
+                         max_order: int = DEFAULT_MAX_ORDER) -> StructureResult:
+    """Does the model generalise? Structure that the training rows do not show (a calibration
+    that fits the training runs and extrapolates wrongly to the held-out ones) is predicted by
+    nothing fitted there, yet it is not noise: the held-out one-step errors of the noise model
+    fitted to the training residual are larger than on the training rows. Test: Welch's t on
+    the mean squared standardised innovation of each contiguous stretch (run or span), held-out
+    against training, one-sided with min(n) - 1 degrees of freedom; material when the held-out
+    innovation variance exceeds the training one by min_excess."""
+    r = np.asarray(residual, float)
+    nm = fit_noise_model(r, run_start, train_mask & np.isfinite(r), max_order=max_order)
+    rows = test_mask & np.isfinite(r)
+    trows = train_mask & np.isfinite(r)
+    # plain squared residuals (a noise model fitted to a residual with slow structure would
+    # forecast the structure and hide the gap); runs or spans as clusters keep coloured noise
+    # honest
+    z2 = np.where(np.isfinite(r), r * r, 0.0)
+
+    def stretch_means(mask):
+        return np.array([float(np.mean(z2[a:b])) for a, b in segments_of(np.where(mask, 0.0, np.nan), run_start)
+                         if b - a >= MIN_BLOCK_ROWS])
+
+    # clusters: the contiguous stretches (whole runs, or spans) of each side, so noise whose
+    # level differs from run to run widens the interval instead of passing for structure
+    a_, b_ = stretch_means(trows), stretch_means(rows)
+    nb = int(b_.size)
+    if a_.size < 2 or b_.size < 2:
+        cmp = PredictiveComparison(0.0, 0.0, 1.0, nb, int(rows.sum()), 0.0, math.nan, math.nan, nm, nm)
+        return StructureResult(False, cmp)
+    se = math.sqrt(float(np.var(a_, ddof=1)) / a_.size + float(np.var(b_, ddof=1)) / b_.size)
+    diff = float(b_.mean() - a_.mean())
+    tstat = diff / se if se > 0 else 0.0
+    dof = max(a_.size + b_.size - 2, 1)
+    p = float(stats.t.sf(tstat, dof))
+    excess = float(np.mean(z2[rows]) / np.mean(z2[trows]) - 1.0)
+    sums = b_
+    rm = float(np.sqrt(np.mean(r[rows] ** 2))) if rows.any() else math.nan
+    cmp = PredictiveComparison(delta_ll=-0.5 * float(np.sum(sums)), t_stat=tstat, p_value=p, n_blocks=nb,
+                               n_rows=int(rows.sum()), gain_frac=excess, rmse_null=rm, rmse_alt=rm,
+                               noise_null=nm, noise_alt=nm, block_gain=sums)
+    return StructureResult(structured=bool(p < alpha and excess > min_excess), comparison=cmp,
+                           feature_names=["held-out excess over the training noise"])

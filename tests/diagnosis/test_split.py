@@ -1,0 +1,91 @@
+"""Held-out data for any campaign shape: whole runs when there are enough, time spans of long
+runs otherwise; the labels round-trip through report.json's notation."""
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+
+from clutch_model.diagnosis.split import HeldOut, choose_split, parse_held_out
+from clutch_model.errors import DataError
+
+
+@dataclass
+class R:
+    name: str
+    t: np.ndarray
+    slip_speed_rad_s: np.ndarray
+    sump_temperature_c: np.ndarray
+
+    @property
+    def duration_s(self):
+        return float(self.t[-1] - self.t[0])
+
+    def __len__(self):
+        return self.t.size
+
+
+def _runs(n, duration_s, rate_hz=100.0):
+    out = []
+    for j in range(n):
+        t = np.arange(int(duration_s * rate_hz)) / rate_hz
+        out.append(R(f"run_{j:02d}", t, np.full(t.size, 5.0 + (j % 3)), np.full(t.size, 60.0 + (j % 4))))
+    return out
+
+
+def _concat(runs):
+    return (np.concatenate([r.t for r in runs]),
+            np.concatenate([np.full(len(r), j) for j, r in enumerate(runs)]))
+
+
+def test_many_runs_hold_out_whole_runs():
+    runs = _runs(9, 5.0)
+    split = choose_split(runs)
+    assert all(h.whole_run for h in split.held_out) and len(split.held_out) == 3
+    t, idx = _concat(runs)
+    fit, ev = split.masks([r.name for r in runs], idx, t)
+    assert not (fit & ev).any()
+    held_idx = {[r.name for r in runs].index(h.run) for h in split.held_out}
+    assert set(np.unique(idx[ev])) == held_idx
+    assert set(split.fit_runs([r.name for r in runs])).isdisjoint(split.labels)
+
+
+def test_one_long_run_holds_out_spans_with_guards():
+    runs = _runs(1, 120.0)
+    split = choose_split(runs)
+    assert len(split.held_out) >= 3 and not any(h.whole_run for h in split.held_out)
+    t, idx = _concat(runs)
+    fit, ev = split.masks(["run_00"], idx, t)
+    # about a third held out, the rest fitted, guards in neither
+    assert 0.25 < ev.mean() < 0.4 and 0.55 < fit.mean() < 0.75
+    assert not (fit & ev).any() and (~fit & ~ev).sum() > 0
+    # spans are inside the run and labelled "<bag>[t0:t1]"
+    for h in split.held_out:
+        assert h.label.startswith("run_00[") and 0 <= h.t0 < h.t1 <= 120.0 + 1e-3
+        assert parse_held_out(h.label) == h
+    # every held-out row is inside a labelled span
+    inside = np.zeros(t.size, bool)
+    for h in split.held_out:
+        inside |= (t >= h.t0) & (t < h.t1)
+    assert inside[ev].all()
+
+
+def test_two_runs_use_spans_and_a_whole_bag_label_parses():
+    runs = _runs(2, 30.0)
+    split = choose_split(runs)
+    assert {h.run for h in split.held_out} == {"run_00", "run_01"}
+    assert parse_held_out("run_00") == HeldOut("run_00")
+    assert parse_held_out("a[b][1.5:3]") == HeldOut("a[b]", 1.5, 3.0)
+
+
+def test_given_labels_and_bad_input():
+    runs = _runs(1, 20.0)
+    t, idx = _concat(runs)
+    split = choose_split(runs, held_out=["run_00[5:10]"])
+    fit, ev = split.masks(["run_00"], idx, t)
+    assert ev.sum() == pytest.approx(500 - split.guard_s * 100, abs=2)
+    with pytest.raises(DataError):
+        choose_split(runs, held_out=["nope"]).masks(["run_00"], idx, t)
+    with pytest.raises(DataError):
+        parse_held_out("run_00[10:5]")
+    with pytest.raises(DataError):
+        choose_split(runs, held_out=["run_00"]).masks(["run_00"], idx, t)
