@@ -269,7 +269,7 @@ def soak(duration_s: float, rate_hz: float = 1000.0, seed: int = 0, progress: bo
     from hypothesis import HealthCheck, Phase, given, settings
     from hypothesis import seed as hyp_seed
 
-    domain = str(random.Random(seed ^ os.getpid()).randint(1, 200))
+    domain = os.environ.get("ROS_DOMAIN_ID") or str(random.Random(seed ^ os.getpid()).randint(1, 200))
     os.environ["ROS_DOMAIN_ID"] = domain
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in (str(REPO), os.environ.get("PYTHONPATH", "")) if p))
     proc = subprocess.Popen([sys.executable, "-m", "clutch_sim_ros.node", "--ros-args", "-p", "use_sim_time:=true",
