@@ -42,6 +42,19 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> int:
+    """Console entry: ``_main`` with Ctrl-C at any point (imports, parsing, the command) ending
+    in one line and exit code 130."""
+    try:
+        return _main(argv)
+    except KeyboardInterrupt:
+        from clutch_sim import interrupts
+
+        interrupts.quiet()
+        print("clutch-sim: interrupted", file=sys.stderr)
+        return 130
+
+
+def _main(argv=None) -> int:
     os.environ.setdefault("NUMBA_CACHE_DIR", os.path.join(os.path.dirname(os.path.dirname(
         os.path.abspath(__file__))), ".numba_cache"))
     from clutch_model.errors import ClutchSimError

@@ -139,6 +139,9 @@ def test_play_clock_and_record_equal_offline_replay(domain_id, tmp_path):
                                off.sim.pack_temperature_c, rtol=RTOL, atol=ATOL)
     np.testing.assert_array_equal([m.applied_force for _, m in states], off.campaign.force)
     assert "/diagnostics" in rec
+    # nothing logged before the data starts (no 1970 log times), nothing after it ends
+    all_log = [t for msgs in rec.values() for t, _ in msgs]
+    assert min(all_log) >= rows[0] and max(all_log) <= rows[-1]
 
 
 def test_live_replay_returns_offline_rmse(domain_id, tmp_path):
