@@ -11,6 +11,10 @@ target=${2:-tests/ros}
 here=$(cd "$(dirname "$0")/.." && pwd)
 cd "$here"
 py=${PYTHON:-$here/.venv/bin/python}
+if [ "$target" != "make" ] && [ ! -x "$py" ]; then
+    echo "loop_tests: no $py (run 'make venv' first or set PYTHON=...)" >&2
+    exit 2
+fi
 logs=${LOOP_LOG_DIR:-out/loop_tests}
 mkdir -p "$logs"
 export NUMBA_CACHE_DIR=${NUMBA_CACHE_DIR:-$here/.numba_cache}
