@@ -436,19 +436,19 @@ def test_realtime_play_and_record(io1, domain_id, tmp_path):
                       reader.messages([c for c in reader.connections if c.topic == "/rig1/clutch_state"])]
         log_times = [t for _, t, _ in reader.messages()]
     assert min(log_times) >= t_launch                     # nothing stamped before the recording
-    assert topics["/rig1/clutch_state"] > 500 and topics["/rig1/clutch_torque"] > 500
+    assert topics["/rig1/clutch_state"] > 100 and topics["/rig1/clutch_torque"] > 100
     assert topics["/diagnostics"] >= 1
     recorded = {stamp_ns(m.header.stamp) for _, m in rec_states}
     lo, hi = min(recorded), max(recorded)
     seen = {stamp_ns(m.header.stamp) for m in io1.states}
     inside = {t for t in seen if lo <= t <= hi}
-    assert len(inside) > 500
+    assert len(inside) > 100
     assert inside <= recorded, f"{len(inside - recorded)} of {len(inside)} messages missing from the recording"
     from clutch_model.formats.bag_messages import read_messages
 
     bag_forces = {m.value for m in read_messages(bag).messages if m.topic == "applied_force"}
     played = {m.applied_force for _, m in rec_states} & bag_forces
-    assert len(played) > 50
+    assert len(played) > 20
 
 
 def test_yaml_parameters_remap_and_startup_hold(client, domain_id, tmp_path):
