@@ -327,8 +327,8 @@ def energy_keeping(seconds: float, rate: float, load: int) -> dict:
             "energy_over_power_pct": 100.0 * dissipated / integral,
             "plant_time_per_wall_s": (stamp[-1] - stamp[0]) / wall,
             "achieved_hz": ticks / span,
-            "stalls": int(inside[-1][1]["stalls"]) if inside else -1,
-            "longest_gap_ms": float(inside[-1][1]["longest_gap_ms"]) if inside else float("nan"),
+            "stalls": int(inside[-1][1].get("stalls", -1)) if inside else -1,
+            "longest_gap_ms": float(inside[-1][1].get("longest_gap_ms", "nan")) if inside else float("nan"),
             "samples": len(r), "cpus": os.cpu_count(), "busy_s": cpu_busy,
         })
     finally:
