@@ -293,6 +293,7 @@ def soak(duration_s: float, rate_hz: float = 1000.0, seed: int = 0, progress: bo
         driver.stats = Stats()
         rss0 = _rss_mb(proc.pid)
         t0 = time.monotonic()
+        rss_t = [(t0, rss0)]
         driver.deadline = t0 + duration_s
         rounds = 0
         last_print = t0
@@ -307,6 +308,8 @@ def soak(duration_s: float, rate_hz: float = 1000.0, seed: int = 0, progress: bo
                 driver.play(segments)
 
             drive()
+            if time.monotonic() - rss_t[-1][0] >= 10.0 and proc.poll() is None:
+                rss_t.append((time.monotonic(), _rss_mb(proc.pid)))
             if progress and time.monotonic() - last_print > 10:
                 last_print = time.monotonic()
                 print(f"soak: {last_print - t0:.0f}/{duration_s:g} s, {driver.stats.ticks} ticks, "
@@ -324,6 +327,8 @@ def soak(duration_s: float, rate_hz: float = 1000.0, seed: int = 0, progress: bo
             "on_time_pct": 100.0 * s.on_time / max(1, s.ticks),
             "outputs_received": s.outputs, "nonfinite_outputs": s.nonfinite_outputs,
             "rss_start_mb": rss0, "rss_end_mb": rss1, "rss_growth_mb": rss1 - rss0,
+            "rss_samples_mb": [round(r, 2) for _, r in rss_t],
+            "rss_growth_second_half_mb": (rss_t[-1][1] - rss_t[len(rss_t) // 2][1]) if len(rss_t) > 2 else float("nan"),
             "rejected": {n: int(inputs.get(f"{n}.rejected", -1)) for n in INPUTS},
             "received": {n: int(inputs.get(f"{n}.received", -1)) for n in INPUTS},
             "clock_jumps_back": int(timing.get("clock_jumps_back", -1)),
@@ -360,7 +365,8 @@ def main() -> int:
     print(f"  segments               {res['segments']}")
     print(f"  answered / on time     {res['answered_pct']:.2f} % / {res['on_time_pct']:.2f} % of ticks")
     print(f"  node memory (RSS)      {res['rss_start_mb']:.1f} -> {res['rss_end_mb']:.1f} MB "
-          f"(growth {res['rss_growth_mb']:+.1f} MB)")
+          f"(growth {res['rss_growth_mb']:+.1f} MB; second half {res['rss_growth_second_half_mb']:+.1f} MB; "
+          f"every 10 s: {res['rss_samples_mb']})")
     print(f"  rejected inputs        {res['rejected']} of {res['received']} received")
     print(f"  clock jumps back       {res['clock_jumps_back']} seen by the node ({res['clock_backs_sent']} sent)")
     print(f"  non-finite outputs     {res['nonfinite_outputs']} of {res['outputs_received']} received")
