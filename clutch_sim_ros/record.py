@@ -28,6 +28,7 @@ from clutch_model.errors import DataError
 from clutch_model.formats.bag_messages import normalize_namespace
 
 RECORD_QOS_DEPTH = 1000
+EARLY_LIMIT = 100_000     # messages held until the first valid log time (sim time: the first /clock)
 
 
 def output_topics(namespace: str) -> list[tuple[str, str]]:
@@ -95,13 +96,15 @@ class Recorder:
 
     QoS: reliable, keep last RECORD_QOS_DEPTH, so no message is lost while the recorder is
     busy (the node keeps 1000 per output for lagging readers). Nothing is written before the
-    data starts: while ``gated`` (until ``open_gate()``) and while ``log_time()`` is not a valid
-    time (None or <= 0: e.g. the ROS clock in sim time before the first /clock) messages are
-    counted in ``skipped`` instead. ``counts`` = messages queued for writing per topic.
+    data starts: while ``gated`` (until ``open_gate()``) messages are counted in ``skipped``;
+    while ``log_time()`` is not a valid time (None or <= 0: the ROS clock in sim time before the
+    first /clock) they are skipped too, or with ``hold_early`` held and logged at the first valid
+    time (the node's outputs for the first /clock can arrive before that /clock does). ``counts`` = messages queued for writing per topic.
     """
 
     def __init__(self, node, out, namespace: str = "/clutch", *, log_time: Optional[Callable[[], int]] = None,
-                 overwrite: bool = False, topics: Optional[list] = None, gated: bool = False):
+                 overwrite: bool = False, topics: Optional[list] = None, gated: bool = False,
+                 hold_early: bool = False):
         from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
         from clutch_model.formats.typestore import typestore
@@ -113,6 +116,8 @@ class Recorder:
         self.bag = McapOut(out, overwrite=overwrite)
         self.counts: dict[str, int] = {}
         self.skipped = 0
+        self.hold_early = hold_early
+        self._early: list = []
         self._gate_open = not gated
         self._subs = []
         self._data_subs = []      # the node's own outputs (not /diagnostics): must be matched
@@ -147,8 +152,16 @@ class Recorder:
             return
         t = self._log_time() if self._gate_open else None
         if t is None or t <= 0:
-            self.skipped += 1
+            if self._gate_open and self.hold_early and len(self._early) < EARLY_LIMIT:
+                self._early.append((conn, topic, data))   # logged at the first valid time
+            else:
+                self.skipped += 1
             return
+        if self._early:
+            for c, tp, d in self._early:
+                self._queue.put((c, int(t), d))
+                self.counts[tp] += 1
+            self._early = []
         self._queue.put((conn, int(t), data))
         self.counts[topic] += 1
 
@@ -165,7 +178,10 @@ class Recorder:
                     self._error = exc
 
     def close(self) -> Path:
-        """Stop receiving, write everything queued, close the bag (idempotent)."""
+        """Stop receiving, write everything queued, close the bag (idempotent). Messages
+        still held for want of a valid log time are not written (counted in ``skipped``)."""
+        self.skipped += len(self._early)
+        self._early = []
         for sub in self._subs:
             try:
                 self._node.destroy_subscription(sub)
@@ -187,7 +203,8 @@ def record(out, namespace: str = "/clutch", duration_s: Optional[float] = None, 
     """Record the node's outputs until ``duration_s`` elapsed (wall clock) or SIGINT/SIGTERM.
 
     Log time: the system clock at reception, or with ``use_sim_time`` the /clock time
-    (messages before the first /clock are skipped, never logged at 0). On SIGINT/SIGTERM the
+    (messages that arrive before the first /clock are logged at the first /clock time, never
+    at 0). On SIGINT/SIGTERM the
     messages already delivered are still taken and written (up to 2 s), then the bag is
     closed: it is complete. Returns {"out", "counts": {topic: messages}, "skipped",
     "interrupted"}."""
@@ -213,7 +230,7 @@ def record(out, namespace: str = "/clutch", duration_s: Optional[float] = None, 
     recorder = None
     executor = SingleThreadedExecutor(context=context)
     try:
-        recorder = Recorder(node, out, namespace, overwrite=overwrite, log_time=log_time)
+        recorder = Recorder(node, out, namespace, overwrite=overwrite, log_time=log_time, hold_early=use_sim_time)
         executor.add_node(node)
         start = time.monotonic()
         last_print = start
