@@ -202,6 +202,7 @@ class Player:
             force_msg.data, slip_msg.data = f, w
             sump_msg = self._temperature(s, t)
             clock_msg.clock.sec, clock_msg.clock.nanosec = divmod(t, 1_000_000_000)
+            torque_before = self.recorder.counts[f"{self.ns}/clutch_torque"] if self.recorder is not None else 0
             for attempt in range(self.max_attempts):
                 self._awaiting, self._answer = t, None
                 pf.publish(force_msg)
@@ -226,21 +227,20 @@ class Player:
             pack[k] = a.pack_temperature
             self._awaiting = None
             if self.recorder is not None:  # the other outputs of this step, before the next clock
-                self._flush_recorder()
+                self._flush_recorder(t, torque_before)
             if bar is not None:
                 bar.update(1)
         return result
 
-    def _flush_recorder(self, timeout_s: float = 5.0) -> None:
-        """Wait until the recorder has taken this step's three outputs, so they are logged
-        at this step's time (the player's own clutch_state subscription may run first). They
-        are reliable and already answered for by clutch_state, so the wait ends at once unless
-        the machine is very busy."""
-        counts = self.recorder.counts
-        topics = [f"{self.ns}/{name}" for name in ("clutch_torque", "pack_temperature", "clutch_state")]
-        target = self._step_count + 1
-        self._spin_until(lambda: all(counts[t] >= target for t in topics), timeout_s)
-        self._step_count = min(counts[t] for t in topics)
+    def _flush_recorder(self, t_ns: int, torque_before: int, timeout_s: float = 30.0) -> None:
+        """Wait until the recorder has taken this step's outputs (clutch_state and
+        pack_temperature stamped t_ns, one more clutch_torque), so they are logged at this
+        step's time before the next /clock. They are reliable and already answered for by
+        clutch_state, so the wait ends at once unless the machine is very busy."""
+        rec = self.recorder
+        state, temp, torque = (f"{self.ns}/{n}" for n in ("clutch_state", "pack_temperature", "clutch_torque"))
+        self._spin_until(lambda: (rec.last_stamp.get(state) == t_ns and rec.last_stamp.get(temp) == t_ns
+                                  and rec.counts[torque] > torque_before), timeout_s)
 
     # ---- real time ---------------------------------------------------------------------
     def play_realtime(self, path, topics=None, bar=None) -> BagResult:

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import queue
 import shutil
+import struct
 import signal
 import sys
 import tempfile
@@ -38,6 +39,19 @@ def output_topics(namespace: str) -> list[tuple[str, str]]:
             (f"{ns}/pack_temperature", "sensor_msgs/msg/Temperature"),
             (f"{ns}/clutch_state", "clutch_msgs/msg/ClutchState"),
             ("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray")]
+
+
+STAMPED = {"sensor_msgs/msg/Temperature", "clutch_msgs/msg/ClutchState"}   # node outputs with a header
+
+
+def header_stamp_ns(data: bytes) -> int:
+    """header.stamp of a serialized message whose first field is a std_msgs/Header (CDR:
+    4-byte encapsulation, then int32 sec, uint32 nanosec); 0 when unreadable."""
+    if len(data) < 12:
+        return 0
+    endian = "<" if data[1] & 1 else ">"
+    sec, nsec = struct.unpack_from(endian + "iI", data, 4)
+    return sec * 1_000_000_000 + nsec if sec > 0 else 0
 
 
 def _python_type(msgtype: str):
@@ -104,7 +118,7 @@ class Recorder:
 
     def __init__(self, node, out, namespace: str = "/clutch", *, log_time: Optional[Callable[[], int]] = None,
                  overwrite: bool = False, topics: Optional[list] = None, gated: bool = False,
-                 hold_early: bool = False):
+                 hold_early: bool = False, header_time: bool = False):
         from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
         from clutch_model.formats.typestore import typestore
@@ -118,6 +132,12 @@ class Recorder:
         self.skipped = 0
         self.hold_early = hold_early
         self._early: list = []
+        # header_time (sim time): the node's stamped outputs are logged at their header stamp
+        # (the /clock time of their step) and clutch_torque at the stamp of the next stamped
+        # output (published right after it in the same step)
+        self.header_time = header_time
+        self._unstamped_wait: list = []
+        self.last_stamp: dict[str, int] = {}
         self._gate_open = not gated
         self._subs = []
         self._data_subs = []      # the node's own outputs (not /diagnostics): must be matched
@@ -127,7 +147,8 @@ class Recorder:
         for topic, msgtype in (topics or output_topics(namespace)):
             conn = self.bag.writer.add_connection(topic, msgtype, typestore=store)
             self.counts[topic] = 0
-            sub = node.create_subscription(_python_type(msgtype), topic, partial(self._on_message, conn, topic),
+            kind = "stamped" if msgtype in STAMPED else ("diag" if topic == "/diagnostics" else "plain")
+            sub = node.create_subscription(_python_type(msgtype), topic, partial(self._on_message, conn, topic, kind),
                                            qos, raw=True)
             self._subs.append(sub)
             if topic != "/diagnostics":
@@ -147,9 +168,24 @@ class Recorder:
     def total(self) -> int:
         return sum(self.counts.values())
 
-    def _on_message(self, conn, topic: str, data: bytes) -> None:
+    def _on_message(self, conn, topic: str, kind: str, data: bytes) -> None:
         if self.bag.closed:
             return
+        if kind == "stamped":
+            self.last_stamp[topic] = header_stamp_ns(data)
+        if self.header_time and self._gate_open and kind != "diag":
+            if kind == "plain":
+                self._unstamped_wait.append((conn, topic, data))
+                return
+            t = self.last_stamp[topic]
+            if t > 0:
+                for c, tp, d in self._unstamped_wait:
+                    self._queue.put((c, t, d))
+                    self.counts[tp] += 1
+                self._unstamped_wait = []
+                self._queue.put((conn, t, data))
+                self.counts[topic] += 1
+                return
         t = self._log_time() if self._gate_open else None
         if t is None or t <= 0:
             if self._gate_open and self.hold_early and len(self._early) < EARLY_LIMIT:
@@ -180,8 +216,8 @@ class Recorder:
     def close(self) -> Path:
         """Stop receiving, write everything queued, close the bag (idempotent). Messages
         still held for want of a valid log time are not written (counted in ``skipped``)."""
-        self.skipped += len(self._early)
-        self._early = []
+        self.skipped += len(self._early) + len(self._unstamped_wait)
+        self._early, self._unstamped_wait = [], []
         for sub in self._subs:
             try:
                 self._node.destroy_subscription(sub)
@@ -202,9 +238,10 @@ def record(out, namespace: str = "/clutch", duration_s: Optional[float] = None, 
            use_sim_time: bool = False, overwrite: bool = False, progress: bool = True) -> dict:
     """Record the node's outputs until ``duration_s`` elapsed (wall clock) or SIGINT/SIGTERM.
 
-    Log time: the system clock at reception, or with ``use_sim_time`` the /clock time
-    (messages that arrive before the first /clock are logged at the first /clock time, never
-    at 0). On SIGINT/SIGTERM the
+    Log time: the system clock at reception, or with ``use_sim_time`` the sim time: the node's
+    stamped outputs at their header stamp (the /clock time of their step), clutch_torque with
+    the stamped output of its step, /diagnostics at the /clock time (held until the first
+    /clock arrives; never logged at 0). On SIGINT/SIGTERM the
     messages already delivered are still taken and written (up to 2 s), then the bag is
     closed: it is complete. Returns {"out", "counts": {topic: messages}, "skipped",
     "interrupted"}."""
@@ -230,7 +267,8 @@ def record(out, namespace: str = "/clutch", duration_s: Optional[float] = None, 
     recorder = None
     executor = SingleThreadedExecutor(context=context)
     try:
-        recorder = Recorder(node, out, namespace, overwrite=overwrite, log_time=log_time, hold_early=use_sim_time)
+        recorder = Recorder(node, out, namespace, overwrite=overwrite, log_time=log_time, hold_early=use_sim_time,
+                            header_time=use_sim_time)
         executor.add_node(node)
         start = time.monotonic()
         last_print = start
