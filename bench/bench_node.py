@@ -16,6 +16,15 @@ With --flood HZ a third process publishes applied_force/slip_speed/sump_temperat
 (the client-to-client latency then only counts the few forces the flood does not overwrite).
 Also prints how many cores other processes kept busy during the window.
 Exit status 0 unless the node died (targets are reported, not enforced).
+
+    .venv/bin/python bench/bench_node.py --energy [--load N] [--seconds 12]
+
+Plant time under load: N busy-loop processes (default: one per core) keep the cores busy
+while the node runs at --rate with constant inputs; the client integrates the power the node
+reports over its own receive (wall) times and compares it with the dissipated energy the
+plant reports over the same window (target: within 1 %), and prints plant time (stamps) per
+wall second and the achieved tick rate (a plant stepped by 1/rate per tick would fall behind
+by that rate).
 """
 from __future__ import annotations
 
@@ -234,6 +243,110 @@ def run(seconds: float, rate: float, executor: str, flood_hz: float) -> dict:
     return result
 
 
+BUSY_SRC = "import time\nend = time.monotonic() + float(__import__('sys').argv[1])\nwhile time.monotonic() < end:\n    pass\n"
+
+
+def energy_keeping(seconds: float, rate: float, load: int) -> dict:
+    """Energy the plant dissipates per wall second vs its power, with ``load`` busy processes."""
+    import numpy as np
+    import rclpy
+    from clutch_msgs.msg import ClutchState
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.node import Node
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from sensor_msgs.msg import Temperature
+    from std_msgs.msg import Float64
+
+    from clutch_sim_ros.diagnostics import values_of
+
+    domain = str(random.randint(1, 200))
+    env = dict(os.environ, ROS_DOMAIN_ID=domain, PYTHONPATH=str(REPO))
+    os.environ["ROS_DOMAIN_ID"] = domain
+    node_proc = subprocess.Popen([sys.executable, "-m", "clutch_sim_ros.node", "--ros-args", "-p", f"rate_hz:={rate}",
+                                  "-p", "input_timeout_s:=2.0"], env=env, cwd=str(REPO))
+    busy = []
+    rclpy.init()
+    client = Node("bench_energy")
+    reliable = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+    pf = client.create_publisher(Float64, "applied_force", reliable)
+    pw = client.create_publisher(Float64, "slip_speed", reliable)
+    ps = client.create_publisher(Temperature, "sump_temperature", reliable)
+    rows = []      # (receive monotonic s, stamp s, energy J, power W)
+    diags = []
+    client.create_subscription(ClutchState, "clutch_state", lambda m: rows.append(
+        (time.monotonic(), m.header.stamp.sec + m.header.stamp.nanosec * 1e-9, m.energy, m.power)), reliable)
+
+    def on_diag(msg):
+        for st in msg.status:
+            if st.name.endswith(": timing"):
+                diags.append((time.monotonic(), values_of(st)))
+
+    client.create_subscription(DiagnosticArray, "/diagnostics", on_diag, 10)
+    ex = SingleThreadedExecutor()
+    ex.add_node(client)
+    result = {"rate_hz": rate, "seconds": seconds, "load_processes": load}
+    try:
+        def send():
+            pf.publish(Float64(data=2500.0))
+            pw.publish(Float64(data=15.0))
+            ps.publish(Temperature(temperature=60.0))
+
+        deadline = time.monotonic() + 30.0
+        while not rows:
+            if time.monotonic() > deadline or node_proc.poll() is not None:
+                raise RuntimeError("node did not start")
+            send()
+            ex.spin_once(timeout_sec=0.05)
+        busy = [subprocess.Popen([sys.executable, "-c", BUSY_SRC, str(seconds + 5)]) for _ in range(load)]
+        t_end = time.monotonic() + 1.0 + seconds
+        t_window = time.monotonic() + 1.0
+        nxt = 0.0
+        while time.monotonic() < t_end:
+            if time.monotonic() >= nxt:
+                send()
+                nxt = time.monotonic() + 0.01
+            ex.spin_once(timeout_sec=0.002)
+        cpu_busy = _machine_busy_s()
+        end = time.monotonic() + 1.0
+        while time.monotonic() < end:
+            ex.spin_once(timeout_sec=0.05)
+        if node_proc.poll() is not None:
+            raise RuntimeError(f"node died with {node_proc.returncode}")
+        r = np.array([row for row in rows if t_window <= row[0] <= t_end])
+        recv, stamp, energy, power = r.T
+        dissipated = energy[-1] - energy[0]
+        integral = float(np.sum(0.5 * (power[1:] + power[:-1]) * np.diff(recv)))
+        wall = recv[-1] - recv[0]
+        inside = [(t, v) for t, v in diags if t_window <= t <= t_end + 0.6]
+        ticks = int(inside[-1][1]["ticks"]) - int(inside[0][1]["ticks"]) if len(inside) > 1 else 0
+        span = inside[-1][0] - inside[0][0] if len(inside) > 1 else float("nan")
+        result.update({
+            "energy_j": dissipated, "power_integral_wall_j": integral,
+            "energy_over_power_pct": 100.0 * dissipated / integral,
+            "plant_time_per_wall_s": (stamp[-1] - stamp[0]) / wall,
+            "achieved_hz": ticks / span,
+            "stalls": int(inside[-1][1].get("stalls", -1)) if inside else -1,
+            "longest_gap_ms": float(inside[-1][1].get("longest_gap_ms", "nan")) if inside else float("nan"),
+            "samples": len(r), "cpus": os.cpu_count(), "busy_s": cpu_busy,
+        })
+    finally:
+        for proc in busy:
+            proc.terminate()
+            proc.wait()
+        for proc in [node_proc]:
+            if proc.poll() is None:
+                proc.send_signal(signal.SIGINT)
+                try:
+                    proc.wait(timeout=10)
+                except subprocess.TimeoutExpired:
+                    proc.kill()
+        result["node_exit_code"] = node_proc.returncode
+        client.destroy_node()
+        rclpy.try_shutdown()
+    return result
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--seconds", type=float, default=12.0)
@@ -241,7 +354,26 @@ def main() -> int:
     ap.add_argument("--executor", choices=("single", "multi"), default="single")
     ap.add_argument("--flood", type=float, default=0.0, metavar="HZ")
     ap.add_argument("--json", default=None)
+    ap.add_argument("--energy", action="store_true", help="plant time under load: energy vs power per wall second")
+    ap.add_argument("--load", type=int, default=os.cpu_count() or 2, metavar="N",
+                    help="busy-loop processes during --energy (default: one per core)")
     args = ap.parse_args()
+    if args.energy:
+        res = energy_keeping(args.seconds, args.rate, args.load)
+        print(f"clutch_sim node under load ({args.load} busy processes on {res['cpus']} cores, {args.rate:g} Hz, "
+              f"{args.seconds:g} s)")
+        print(f"  dissipated energy          {res['energy_j']:.1f} J")
+        print(f"  power integrated over wall {res['power_integral_wall_j']:.1f} J")
+        print(f"  energy / (power x wall)    {res['energy_over_power_pct']:.2f} % (target 100 +- 1 %)")
+        print(f"  plant time per wall second {res['plant_time_per_wall_s']:.4f} s")
+        print(f"  achieved tick rate         {res['achieved_hz']:.0f} Hz ({100 * res['achieved_hz'] / args.rate:.1f} % "
+              f"of rate_hz: a plant stepped by 1/rate_hz per tick would run at this speed)")
+        print(f"  stalls > 0.1 s             {res['stalls']}, longest gap {res['longest_gap_ms']:.1f} ms")
+        if args.json:
+            Path(args.json).write_text(json.dumps(res, indent=2))
+        ok = abs(res["energy_over_power_pct"] - 100.0) <= 1.0
+        print(f"  target energy within 1 %   {'met' if ok else 'MISSED'}")
+        return 0 if res.get("node_exit_code") in (0, None) else 1
     res = model_step_cost()
     res["step_pct_of_period"] = 100.0 * res["model_step_ms"] * args.rate / 1000.0
     res.update(run(args.seconds, args.rate, args.executor, args.flood))

@@ -41,12 +41,33 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> int:
+    """Console entry: ``_main`` with Ctrl-C at any point (imports, parsing, the command) ending
+    in one line and exit code 130."""
+    try:
+        return _main(argv)
+    except KeyboardInterrupt:
+        from clutch_sim import interrupts
+
+        interrupts.quiet()
+        print("clutch-sim: interrupted", file=sys.stderr)
+        return 130
+
+
+def _main(argv=None) -> int:
     from clutch_model.errors import ClutchSimError
+
+    from clutch_sim import interrupts
 
     parser = build_parser()
     args = parser.parse_args(argv)
+    interrupts.install()
     try:
-        return int(args.func(args) or 0)
+        try:
+            return int(args.func(args) or 0)
+        except BaseException as exc:
+            if interrupts.is_interrupt(exc):   # Ctrl-C, also wrapped (numba SystemError, Dask)
+                raise KeyboardInterrupt from None
+            raise
     except ClutchSimError as exc:
         print(f"clutch-sim {args.command}: error: {exc}", file=sys.stderr)
         return 1
@@ -54,7 +75,10 @@ def main(argv=None) -> int:
         print(f"clutch-sim {args.command}: error: {exc.strerror}: {exc.filename}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
-        print(f"clutch-sim {args.command}: interrupted", file=sys.stderr)
+        interrupts.quiet()
+        sys.stdout.flush()
+        lead = "\n" if sys.stderr.isatty() else ""   # end a progress bar line first
+        print(f"{lead}clutch-sim {args.command}: interrupted (files already written are kept)", file=sys.stderr)
         return 130
 
 

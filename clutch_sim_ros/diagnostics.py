@@ -1,7 +1,9 @@
 """/diagnostics of the clutch_sim node: counters the node updates every tick, and the
 ``diagnostic_msgs/DiagnosticArray`` built from them (2 Hz).
 
-Three statuses, named ``<node fqn>: inputs | timing | plant``:
+Three statuses, named ``<node name>: inputs | timing | plant`` (diagnostic_updater's
+convention, no leading '/', so diagnostic_aggregator can path them); ``hardware_id`` is the
+node's fully qualified name (tells namespaced rigs apart):
 
 - inputs: per topic ``<topic>.state`` (fresh | stale | never), ``.age_s``, ``.value`` (held),
   ``.received``, ``.rejected`` (totals of the messages the node took; the input history keeps
@@ -11,12 +13,15 @@ Three statuses, named ``<node fqn>: inputs | timing | plant``:
   10 x input_timeout_s or has never arrived (the plant is then held at its initial state and
   nothing is published).
 - timing: ticks, achieved rate, late ticks (started >= 1 period after schedule), missed ticks
-  (periods the timer skipped), on_time_pct, overruns (tick > 1 period), callback errors,
+  (periods the timer skipped; the plant still advances by the elapsed time, so plant time keeps
+  wall time), stalls (a gap > STALL_S between ticks, made up in one sub-stepped advance),
+  the longest gap, plant_time_s / wall_time_s since the plant started, on_time_pct, overruns
+  (tick > 1 period), callback errors,
   non-finite resets, and p50/p99/max over the last 10000 ticks of the timer period, the
   lateness, the model step, the whole tick and the input latency (middleware receive time ->
   publish of the first sample computed with that input), process CPU % (all threads). WARN when
   the achieved rate is < 95 % of rate_hz (wall-clock mode) or an error/reset happened since
-  the last report.
+  the last report or a stall happened since the last report.
 - plant: running/waiting, locked, pack force and whether it is clamped at
   model.max_pack_force_n, pressure and pack temperature and whether they leave the friction
   polynomials' box (P in [0, 20] MPa, theta in [0, 230] C). WARN while clamped or out of range
@@ -35,6 +40,7 @@ from clutch_model.plant.inputs import InputChannel
 OK, WARN, ERROR = DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR
 P_BOX_MPA = (0.0, 20.0)
 THETA_BOX_C = (0.0, 230.0)
+STALL_S = 0.1          # a gap between ticks longer than this is a stall (WARN)
 
 
 class Ring:
@@ -76,7 +82,8 @@ class Counters:
     ticks: int = 0
     published: int = 0
     late_ticks: int = 0          # started >= 1 period after their scheduled time
-    missed_ticks: int = 0        # periods the timer skipped (not made up)
+    missed_ticks: int = 0        # periods the timer skipped (the plant advances by the elapsed time)
+    stalls: int = 0              # gaps > STALL_S between ticks
     overruns: int = 0            # tick callback longer than one period
     callback_errors: int = 0
     nonfinite_resets: int = 0
@@ -103,6 +110,9 @@ class Timing:
     step_ms: Ring = field(default_factory=Ring)        # model sample + advance
     tick_ms: Ring = field(default_factory=Ring)        # whole tick callback
     latency_ms: Ring = field(default_factory=Ring)     # input received (middleware) -> published with it
+    longest_gap_ms: float = 0.0                        # longest time between two ticks
+    plant_time_s: float = 0.0                          # plant time advanced since the plant started
+    wall_time_s: float = 0.0                           # time base elapsed since the plant started
 
 
 def _kv(key: str, value) -> KeyValue:
@@ -161,6 +171,10 @@ def timing_status(name: str, hw: str, c: Counters, t: Timing, *, sim_time: bool,
     if not sim_time and c.ticks > 0 and achieved_hz < 0.95 * rate_hz:
         level = WARN
         problems.append(f"achieved {achieved_hz:.1f} Hz of {rate_hz:g}")
+    if c.recent("stalls"):
+        level = WARN
+        problems.append(f"{c.recent('stalls')} stall(s) > {STALL_S:g} s made up (longest gap "
+                        f"{t.longest_gap_ms:.0f} ms)")
     for key in ("callback_errors", "nonfinite_resets", "clock_jumps_back"):
         if c.recent(key):
             level = WARN
@@ -172,7 +186,9 @@ def timing_status(name: str, hw: str, c: Counters, t: Timing, *, sim_time: bool,
     lat = t.latency_ms.percentiles()
     values = [("mode", "sim_time" if sim_time else "wall_clock"), ("rate_hz", rate_hz),
               ("achieved_hz", achieved_hz), ("ticks", c.ticks), ("published", c.published),
-              ("late_ticks", c.late_ticks), ("missed_ticks", c.missed_ticks),
+              ("late_ticks", c.late_ticks), ("missed_ticks", c.missed_ticks), ("stalls", c.stalls),
+              ("longest_gap_ms", t.longest_gap_ms), ("plant_time_s", t.plant_time_s),
+              ("wall_time_s", t.wall_time_s),
               ("on_time_pct", on_time_pct), ("overruns", c.overruns),
               ("callback_errors", c.callback_errors), ("nonfinite_resets", c.nonfinite_resets),
               ("clock_jumps_back", c.clock_jumps_back), ("redone_steps", c.redone_steps),

@@ -97,7 +97,8 @@ def live_replay(bag_paths, namespace: str = "/clutch", out_mcap="out/live.mcap",
     try:
         player = Player(node, executor, namespace, clock=True, progress=progress, discovery_timeout_s=60.0,
                         node_alive=lambda: proc.poll() is None)
-        recorder = Recorder(node, out_mcap, namespace, log_time=lambda: player.sim_now_ns, overwrite=True)
+        recorder = Recorder(node, out_mcap, namespace, log_time=lambda: player.sim_now_ns, overwrite=True,
+                            gated=True)
         player.recorder = recorder
         try:
             result = player.play(paths, topics)
@@ -107,9 +108,6 @@ def live_replay(bag_paths, namespace: str = "/clutch", out_mcap="out/live.mcap",
                 tail = log.read().strip().splitlines()[-1:] or ["(no output)"]
                 raise PlayError(f"clutch-sim-node exited with code {proc.returncode}: {tail[0]}") from None
             raise
-        end = time.monotonic() + 0.3
-        while time.monotonic() < end:
-            executor.spin_once(timeout_sec=0.05)
         out = str(recorder.close())
     finally:
         if recorder is not None:

@@ -4,11 +4,11 @@ lock-step with /clock.
     clutch-sim-node --ros-args -r __ns:=/clutch --params-file config/clutch_sim.yaml
     python -m clutch_sim_ros.node --ros-args -p use_sim_time:=true
 
-Topics (relative names, so a namespace or remap places them; docs/interfaces.md):
+Topics (relative names, so a namespace or remap places them; see docs/node.md):
   in   applied_force (std_msgs/Float64, N), slip_speed (std_msgs/Float64, rad/s),
        sump_temperature (sensor_msgs/Temperature, C)
   out  clutch_torque (std_msgs/Float64, N m), pack_temperature (sensor_msgs/Temperature, C),
-       clutch_state (clutch_msgs/ClutchState, stamped, SI), /diagnostics (2 Hz, wall clock)
+       clutch_state (clutch_msgs/ClutchState, stamped, SI), /diagnostics (2 Hz)
   srv  ~/reset (std_srvs/Trigger)
   sim time only: /clock (rosgraph_msgs/Clock) drives the steps.
 
@@ -16,51 +16,59 @@ QoS.
 - Inputs: sensor-data QoS, latest value only (best effort, keep last 1, volatile). They are
   sampled signals the node holds until the next sample, so only the newest value matters: a
   lost sample is superseded by the next one; best effort never makes the sender block or
-  retransmit; a flooding publisher cannot build a backlog (a newer sample overwrites the
-  older one in the middleware); and a best-effort subscription matches both best-effort and
-  reliable publishers. The node polls the inputs once per tick instead of waking the executor
-  per message, so an input flood costs at most one take per input and tick (the latency stays
-  within one period). Consequence: a message overwritten by a newer one before the next tick
-  is never seen, so /diagnostics' received/rejected counts are of the messages the node took.
-- Outputs: reliable (keep last 100, volatile). A recorder or controller that asks for
-  reliable gets every sample (the history absorbs 100 ms of reader lag at 1 kHz);
-  best-effort subscribers still match.
-- /clock: best effort (keep last 10), so it matches every clock source (rosbag2 and
-  simulators publish /clock best effort).
+  retransmit; a flooding publisher cannot build a backlog (a newer sample overwrites the older
+  one in the middleware); and a best-effort subscription matches both best-effort and reliable
+  publishers. Each input has an ordinary subscription whose callback only validates the value
+  and stores it (latest-value store, clutch_model.plant.inputs.InputChannel); the tick reads
+  the store. The callbacks share the step's mutually exclusive callback group, so a tick never
+  sees a half-applied input.
+- Outputs: reliable, keep last 1000 (1 s at 1 kHz), volatile. A recorder or controller that
+  asks for reliable gets every sample even when it lags by up to a second; best-effort
+  subscribers still match.
+- /clock: best effort (keep last 10), so it matches every clock source (rosbag2 and simulators
+  publish /clock best effort).
 
-Executor: rclpy's SingleThreadedExecutor. A MultiThreadedExecutor (step timer in its own
-callback group) was measured slower under the GIL (bench/bench_node.py --executor multi).
+Executor: rclpy's SingleThreadedExecutor (``--executor multi`` for a MultiThreadedExecutor;
+measured slower under the GIL, bench/bench_node.py).
 
-Timing. Wall-clock mode (use_sim_time false): a steady-clock timer at rate_hz; each tick
-samples the plant with the latest inputs held, publishes (every publish_every-th tick) and
-then advances the plant by exactly 1/rate_hz. Late ticks are counted, not made up (the
-plant then runs slightly behind wall time). Sim-time mode (use_sim_time true): one step per
-/clock message; when the clock advances from t_prev to t the plant is advanced by t - t_prev
-with the previous inputs held, then sampled with the latest inputs and published stamped t,
-so the outputs at t_k come from the state at t_k and the inputs at t_k, exactly as offline
-replay. The inputs that arrived before a /clock message are taken (drained) before the step.
-A repeated /clock time recomputes that step from the state before it with the latest inputs
-(idempotent; used by `clutch-sim play --clock` to retry); a clock that goes backwards
-restarts the plant.
+Timing. Wall-clock mode (use_sim_time false): a steady-clock timer at rate_hz. Each tick first
+advances the plant by the time elapsed since the previous tick (steady clock; 1/rate_hz when on
+time, more when the tick is late or ticks were missed -- the kernels sub-step long steps) with
+the previous inputs held, then samples it with the latest inputs and publishes. So plant time
+keeps wall time whatever the load; lateness, missed ticks and stalls (a gap > 0.1 s, WARN) are
+reported on /diagnostics. Stamps are plant time: the system clock at the plant's start plus the
+steady time since (re-anchored when the system clock drifts > 1 ms), so stamp differences are
+exactly the plant's steps. Sim-time mode (use_sim_time true): one step per /clock message;
+when the clock advances from t_prev to t the plant is advanced by t - t_prev with the previous
+inputs held, then sampled with the latest inputs and published stamped t, so the outputs at
+t_k come from the state at t_k and the inputs at t_k, exactly as offline replay. Inputs that
+arrived before a /clock message are applied before its step (their callbacks come first in the
+executor's order). A repeated /clock time recomputes that step from the state before it with
+the latest inputs (idempotent; used by `clutch-sim play --clock` to retry); a clock that goes
+backwards restarts the plant. Changing use_sim_time at runtime switches between the two (the
+plant state is kept; the first tick in the new time base samples without advancing).
 
-Start-up and inputs. Until the first valid sample of every input has arrived the plant is
-held at its initial state and nothing is published. The first tick with all inputs starts the
-plant (film at initial.film_thickness, pack at the sump temperature, pack force = applied
-force, energy 0). Invalid input messages (docs/interfaces.md, "Input validity") are rejected, counted on
-/diagnostics and the last good value is held; a negative force is valid (the model counts it
-as 0). An input without a valid message for input_timeout_s is stale (diagnostics WARN, ERROR
-after 10 x): a stale applied force is treated as 0 N, which opens the clutch -- the safe state
-of a limited-slip differential (open differential) -- while the stale slip speed and sump
+Start-up and inputs. Until the first valid sample of every input has arrived the plant is held
+at its initial state and nothing is published. The first tick with all inputs starts the plant
+(film at initial.film_thickness, pack at the sump temperature, pack force = applied force,
+energy 0). Invalid input messages (input validity rules of clutch_model.plant.inputs) are
+rejected, counted on /diagnostics and the last good value is held; a negative force is valid
+(the model counts it as 0). An input without a valid message for input_timeout_s is stale
+(diagnostics WARN, ERROR after 10 x): a stale applied force is treated as 0 N, which opens the
+clutch -- the safe state of a limited-slip differential -- while the stale slip speed and sump
 temperature are held. In sim-time mode freshness is measured in sim time.
 
 Outputs. clutch_state carries the inputs the plant used (applied_force is 0 while the force is
 stale), the plant record of clutch_model.plant.kernels (hydrodynamic_torque includes the drag
-torque of the drag_torque mechanism, so asperity + hydrodynamic = clutch_torque) and is
-stamped with the tick time (wall clock, or the /clock time in sim time).
+torque of the drag_torque mechanism, so asperity + hydrodynamic = clutch_torque); stamped
+outputs carry header.frame_id = the frame_id parameter.
 
-Robustness. Every published float is checked; a non-finite output is not published, the
-plant restarts at the next tick and the event is counted. Exceptions in a callback are
-counted and logged (throttled), never raised into the executor.
+Parameters (clutch_sim_ros.params): each applies at runtime or the change is refused with a
+reason; floats accept integers; ranges are in the descriptors.
+
+Robustness. Every published float is checked; a non-finite output is not published, the plant
+restarts at the next tick and the event is counted. Exceptions in a callback are counted and
+logged (throttled), never raised into the executor.
 """
 from __future__ import annotations
 
@@ -80,7 +88,8 @@ import rclpy
 from builtin_interfaces.msg import Time as TimeMsg
 from clutch_msgs.msg import ClutchState
 from diagnostic_msgs.msg import DiagnosticArray
-from rclpy.callback_groups import CallbackGroup, MutuallyExclusiveCallbackGroup
+from rcl_interfaces.msg import SetParametersResult
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.clock import Clock, ClockType
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor, SingleThreadedExecutor
 from rclpy.node import Node
@@ -92,50 +101,56 @@ from std_srvs.srv import Trigger
 
 from clutch_model import Plant, load_model
 from clutch_model.plant import kernels as K
+from clutch_model.plant.inputs import INPUT_TOPICS, InputChannel
 
 from clutch_sim_ros import diagnostics as D
 from clutch_sim_ros import params as P
-from clutch_model.plant.inputs import INPUT_TOPICS, InputChannel
+
+
+EXAMPLE = ("clutch-sim-node --ros-args -r __ns:=/clutch --params-file config/clutch_sim.yaml "
+           "-p rate_hz:=500 -p frame_id:=clutch_rear")
+TOPICS_HELP = """topics (relative: a namespace or remap places them):
+  in   applied_force     std_msgs/msg/Float64          actuator force on the pack, N
+  in   slip_speed        std_msgs/msg/Float64          slip speed, rad/s
+  in   sump_temperature  sensor_msgs/msg/Temperature   sump oil temperature, C
+  out  clutch_torque     std_msgs/msg/Float64          transmitted torque, N m
+  out  pack_temperature  sensor_msgs/msg/Temperature   clutch pack temperature, C
+  out  clutch_state      clutch_msgs/msg/ClutchState   stamped full state (SI)
+  out  /diagnostics      diagnostic_msgs/msg/DiagnosticArray  (2 Hz: inputs, timing, plant)
+  srv  ~/reset           std_srvs/srv/Trigger          restart the plant state
+  in   /clock            rosgraph_msgs/msg/Clock       (use_sim_time:=true) one step per message
+QoS: inputs best effort keep-last 1; outputs reliable keep-last 1000; /clock best effort."""
 
 NODE_NAME = "clutch_sim"
 DIAGNOSTICS_PERIOD_S = 0.5
+STAMP_DRIFT_NS = 1_000_000      # re-anchor wall-mode stamps when the system clock drifts more
 INPUT_QOS = QoSProfile(reliability=ReliabilityPolicy.BEST_EFFORT, history=HistoryPolicy.KEEP_LAST,
                        depth=1, durability=DurabilityPolicy.VOLATILE)
 OUTPUT_QOS = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST,
-                        depth=100, durability=DurabilityPolicy.VOLATILE)
+                        depth=1000, durability=DurabilityPolicy.VOLATILE)
 CLOCK_QOS = QoSProfile(reliability=ReliabilityPolicy.BEST_EFFORT, history=HistoryPolicy.KEEP_LAST,
                        depth=10, durability=DurabilityPolicy.VOLATILE)
-_TAKE_LIMIT = 8     # messages taken per input topic and tick (the history holds 1)
 
 
-class PolledCallbackGroup(CallbackGroup):
-    """Entities the executor neither waits on nor runs: the node takes their messages itself
-    (rclpy's executors leave out of the wait set every entity whose group cannot execute)."""
-
-    def can_execute(self, entity) -> bool:
-        return False
-
-    def beginning_execution(self, entity) -> bool:
-        return False
-
-    def ending_execution(self, entity) -> None:
-        pass
+def _clock_offset_ns(with_error: bool = False):
+    """System clock minus steady clock, read back to back (the best of three reads); with
+    ``with_error`` also the read's uncertainty in ns (a preempted read is uncertain)."""
+    best = None
+    for _ in range(3):
+        m0 = time.monotonic_ns()
+        wall = time.time_ns()
+        m1 = time.monotonic_ns()
+        if best is None or m1 - m0 < best[0]:
+            best = (m1 - m0, wall - (m0 + m1) // 2)
+    return (best[1], best[0]) if with_error else best[1]
 
 
 def _time_msg(ns: int) -> TimeMsg:
     return TimeMsg(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
 
 
-def _data(msg) -> float:
-    return msg.data
-
-
-def _temperature(msg) -> float:
-    return msg.temperature
-
-
-def _unused_callback(msg) -> None:  # polled subscriptions: the executor never calls it
-    pass
+def _load(path: str, lock_slip: float):
+    return load_model(path or None).with_lock_slip(lock_slip)
 
 
 class ClutchSimNode(Node):
@@ -144,13 +159,12 @@ class ClutchSimNode(Node):
     def __init__(self, **kwargs):
         super().__init__(NODE_NAME, **kwargs)
         self.params = P.declare(self)
-        model = load_model(self.params.clutch_params_file or None).with_lock_slip(
-            self.params.lock_slip_rad_s)
+        model = _load(self.params.clutch_params_file, self.params.lock_slip_rad_s)
         self.model = model
         self.max_pack_force_n = float(model.max_pack_force_n)
         self._plant = Plant(model)
-        self._dt_s = self.params.period_s
-        self._sim = self.params.use_sim_time
+        self._pending_model = None       # (model, restart) swapped in by the next tick
+        self._loaded_file_model = None   # validated by the on-set callback
 
         self.inputs = {name: InputChannel(name) for name in INPUT_TOPICS}
         self._force, self._slip, self._sump = (self.inputs[n] for n in INPUT_TOPICS)
@@ -158,11 +172,13 @@ class ClutchSimNode(Node):
         self._ever_started = False
         self._last_record: Optional[np.ndarray] = None
         self._tick_index = 0           # ticks since the plant (re)started
-        # sim-time step bookkeeping
-        self._t_prev_ns: Optional[int] = None
+        self._t_prev_ns: Optional[int] = None   # time of the previous step (steady or sim)
+        self._t_start_ns: Optional[int] = None
+        self._rebase = False           # time base changed: restamp the held inputs
         self._last_step_reset = True
         self._snapshot = np.zeros_like(self._plant.state)
         self._now_tick_ns: Optional[int] = None    # time base of input freshness
+        self._stamp_offset_ns = _clock_offset_ns()
 
         self.counters = D.Counters()
         self.timing = D.Timing()
@@ -177,58 +193,132 @@ class ClutchSimNode(Node):
         self._temp_msg = Temperature()
         self._state_msg = ClutchState()
 
-        polled = PolledCallbackGroup()
-        self._input_subs = [
-            (self.create_subscription(Float64, "applied_force", _unused_callback, INPUT_QOS,
-                                      callback_group=polled), self._force, _data),
-            (self.create_subscription(Float64, "slip_speed", _unused_callback, INPUT_QOS,
-                                      callback_group=polled), self._slip, _data),
-            (self.create_subscription(Temperature, "sump_temperature", _unused_callback, INPUT_QOS,
-                                      callback_group=polled), self._sump, _temperature),
-        ]
+        # inputs and the step share one mutually exclusive group: with a MultiThreadedExecutor
+        # a tick never runs while an input is half applied, and diagnostics/services never
+        # wait for a step (with the SingleThreadedExecutor groups change nothing)
+        self._step_group = MutuallyExclusiveCallbackGroup()
+        self.create_subscription(Float64, "applied_force", self._on_force, INPUT_QOS,
+                                 callback_group=self._step_group)
+        self.create_subscription(Float64, "slip_speed", self._on_slip, INPUT_QOS,
+                                 callback_group=self._step_group)
+        self.create_subscription(Temperature, "sump_temperature", self._on_sump, INPUT_QOS,
+                                 callback_group=self._step_group)
         self._pub_torque = self.create_publisher(Float64, "clutch_torque", OUTPUT_QOS)
         self._pub_temp = self.create_publisher(Temperature, "pack_temperature", OUTPUT_QOS)
         self._pub_state = self.create_publisher(ClutchState, "clutch_state", OUTPUT_QOS)
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", OUTPUT_QOS)
         self.create_service(Trigger, "~/reset", self._on_reset)
 
-        # the step has its own callback group: with a MultiThreadedExecutor it never waits for
-        # the diagnostics or a service call (with the SingleThreadedExecutor groups change nothing)
-        steady = Clock(clock_type=ClockType.STEADY_TIME)
-        step_group = MutuallyExclusiveCallbackGroup()
-        if self._sim:
-            self.create_subscription(ClockMsg, "/clock", self._on_clock, CLOCK_QOS,
-                                     callback_group=step_group)
-            self._step_timer = None
-        else:
-            self._step_timer = self.create_timer(self._dt_s, self._on_timer, clock=steady,
-                                                 callback_group=step_group)
-        self.create_timer(DIAGNOSTICS_PERIOD_S, self._on_diagnostics, clock=steady)
+        self._steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self._step_timer = None
+        self._clock_sub = None
+        self._sim = None
+        self._set_mode(self.params.use_sim_time)
+        self.create_timer(DIAGNOSTICS_PERIOD_S, self._on_diagnostics, clock=self._steady)
+        self.add_pre_set_parameters_callback(P.as_double)
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        self.add_post_set_parameters_callback(self._on_parameters_set)
         self.get_logger().info(
-            f"clutch model {model.source}; {'sim time: one step per /clock' if self._sim else f'{self.params.rate_hz:g} Hz'}, "
+            f"clutch model {model.source}; {self._mode_text()}, "
             f"publish every {self.params.publish_every}, input timeout {self.params.input_timeout_s:g} s; "
             f"waiting for {', '.join(self.inputs)}")
 
-    # ---- inputs ------------------------------------------------------------------------
-    def _poll_inputs(self) -> None:
-        """Take every input message that arrived since the last tick, oldest first (the last
-        good one wins). Inputs are polled by the tick instead of waking the executor per
-        message: a flooding publisher costs the executor nothing, the inputs a tick uses are
-        exactly those that arrived before it (in sim time: before its /clock message), and the
-        latency is bounded by one period either way."""
-        for sub, channel, value_of in self._input_subs:
-            for _ in range(_TAKE_LIMIT):
-                with sub.handle:
-                    taken = sub.handle.take_message(sub.msg_type, sub.raw)
-                if taken is None:
-                    break
-                channel.offer(value_of(taken[0]), taken[1].get("received_timestamp", 0))
+    def _mode_text(self) -> str:
+        return "sim time: one step per /clock" if self._sim else f"{self.params.rate_hz:g} Hz"
 
-    # ---- stepping ----------------------------------------------------------------------
+    # ---- stepping mode -------------------------------------------------------------
+    def _set_mode(self, sim: bool) -> None:
+        """Step on /clock (sim) or on the steady wall-clock timer; keeps the plant state."""
+        if sim == self._sim:
+            return
+        if sim:
+            if self._step_timer is not None:
+                self.destroy_timer(self._step_timer)
+                self._step_timer = None
+            self._clock_sub = self.create_subscription(ClockMsg, "/clock", self._on_clock, CLOCK_QOS,
+                                                       callback_group=self._step_group)
+        else:
+            if self._clock_sub is not None:
+                self.destroy_subscription(self._clock_sub)
+                self._clock_sub = None
+            self._step_timer = self.create_timer(self.params.period_s, self._on_timer, clock=self._steady,
+                                                 callback_group=self._step_group)
+        changed = self._sim is not None
+        self._sim = sim
+        self._t_prev_ns = None            # the next tick continues without advancing
+        self._prev_next_call_ns = self._prev_tick_start_ns = None
+        self._rebase = changed
+        if changed:
+            self.get_logger().info(f"use_sim_time changed: now {self._mode_text()}")
+
+    # ---- parameters ----------------------------------------------------------------
+    def _on_set_parameters(self, parameters) -> SetParametersResult:
+        for p in parameters:
+            reason = P.check_change(p.name, p.value)
+            if reason is None and p.name == "clutch_params_file":
+                try:
+                    self._loaded_file_model = load_model(p.value or None)
+                except Exception as exc:  # a bad file is refused, the running model stays
+                    reason = f"clutch_params_file refused: {exc}"
+            if reason is not None:
+                return SetParametersResult(successful=False, reason=reason)
+        return SetParametersResult(successful=True)
+
+    def _on_parameters_set(self, parameters) -> None:
+        try:
+            for p in parameters:
+                if p.name not in P.SPEC_BY_NAME:
+                    continue
+                self.params = self.params.with_value(p.name, p.value)
+                if p.name == "rate_hz" and self._step_timer is not None:
+                    self._step_timer.timer_period_ns = int(round(1e9 / self.params.rate_hz))
+                    self._prev_next_call_ns = None
+                elif p.name == "clutch_params_file" and self._loaded_file_model is not None:
+                    base = self._loaded_file_model
+                    self._pending_model = (base.with_lock_slip(self.params.lock_slip_rad_s), True)
+                    self._loaded_file_model = None
+                elif p.name == "lock_slip_rad_s":
+                    base, restart = self._pending_model or (self.model, False)
+                    self._pending_model = (base.with_lock_slip(self.params.lock_slip_rad_s), restart)
+                elif p.name == "use_sim_time":
+                    self._set_mode(bool(p.value))
+                self.get_logger().info(f"parameter {p.name} = {p.value!r} applied")
+        except Exception as exc:
+            self._callback_error(exc)
+
+    def _swap_model(self, inputs) -> None:
+        """Apply a model change between ticks (after the advance with the old model)."""
+        model, restart = self._pending_model
+        self._pending_model = None
+        state = self._plant.state.copy()
+        self._plant = Plant(model)
+        self.model = model
+        self.max_pack_force_n = float(model.max_pack_force_n)
+        if restart:
+            self._start(inputs)
+        else:
+            self._plant.state[:] = state
+        self.get_logger().info(f"clutch model {model.source}, lock slip {model.lock_slip_rad_s:g} rad/s"
+                               + (": plant restarted" if restart else ""))
+
+    # ---- inputs --------------------------------------------------------------------
+    def _on_force(self, msg, info) -> None:
+        self._force.offer(msg.data, info.get("received_timestamp", 0))
+
+    def _on_slip(self, msg, info) -> None:
+        self._slip.offer(msg.data, info.get("received_timestamp", 0))
+
+    def _on_sump(self, msg, info) -> None:
+        self._sump.offer(msg.temperature, info.get("received_timestamp", 0))
+
+    # ---- stepping ------------------------------------------------------------------
     def _held_inputs(self, now_ns: int) -> Optional[tuple[float, float, float]]:
         """The inputs for this tick (None until every input has arrived); stale force -> 0."""
-        self._poll_inputs()
         f, w, s = self._force, self._slip, self._sump
+        if self._rebase:
+            for ch in (f, w, s):
+                ch.rebase(now_ns)
+            self._rebase = False
         f.on_tick(now_ns)
         w.on_tick(now_ns)
         s.on_tick(now_ns)
@@ -238,35 +328,67 @@ class ClutchSimNode(Node):
         force = 0.0 if f.is_stale(now_ns, self.params.input_timeout_s) else f.value
         return force, w.value, s.value
 
+    def _step_to(self, t_ns: int, inputs) -> None:
+        """Bring the plant to time t_ns (the tick's time base) with the previous inputs held."""
+        plant = self._plant
+        if not self._running:
+            self._start(inputs)
+            self._t_start_ns = t_ns
+        elif self._t_prev_ns is None:                 # first tick in a new time base
+            self._snapshot[:] = plant.state
+            self._t_start_ns = t_ns - int(self.timing.plant_time_s * 1e9)
+        elif t_ns > self._t_prev_ns:
+            dt = (t_ns - self._t_prev_ns) * 1e-9
+            self._t_prev_ns = t_ns                    # an error below never repeats a long step
+            plant.advance(dt)
+            self.timing.plant_time_s += dt
+            self._last_step_reset = False
+            self._snapshot[:] = plant.state
+        elif t_ns == self._t_prev_ns:                 # repeated time: recompute this step
+            self.counters.redone_steps += 1
+            self._tick_index -= 1
+            if self._last_step_reset:
+                self._start(inputs)
+            else:
+                plant.state[:] = self._snapshot
+        else:                                         # clock went backwards: restart
+            self.counters.clock_jumps_back += 1
+            self._start(inputs)
+            self._t_start_ns = t_ns
+        self._t_prev_ns = t_ns
+        if self._t_start_ns is not None:
+            self.timing.wall_time_s = (t_ns - self._t_start_ns) * 1e-9
+        if self._pending_model is not None:
+            self._swap_model(inputs)
+
     def _on_timer(self) -> None:
-        """Wall-clock tick: sample -> publish -> advance(1/rate_hz)."""
+        """Wall-clock tick: advance by the elapsed time -> sample -> publish."""
         t0 = time.monotonic_ns()
         try:
             self._timer_bookkeeping(t0)
             inputs = self._held_inputs(t0)
             if inputs is None:
                 return
-            if not self._running:
-                self._start(inputs)
             s0 = time.perf_counter_ns()
+            started = not self._running
+            self._step_to(t0, inputs)
+            if started or self._t_start_ns == t0:
+                self._stamp_offset_ns = _clock_offset_ns()
             record = self._plant.sample(*inputs)
-            s1 = time.perf_counter_ns()
-            if self._publish(record, inputs, time.time_ns()):
-                s2 = time.perf_counter_ns()
-                self._plant.advance(self._dt_s)
-                self.timing.step_ms.add(((s1 - s0) + (time.perf_counter_ns() - s2)) * 1e-6)
+            self.timing.step_ms.add((time.perf_counter_ns() - s0) * 1e-6)
+            self._publish(record, inputs, self._stamp_offset_ns + t0)
         except Exception as exc:  # never raise into the executor
             self._callback_error(exc)
         finally:
             dur = time.monotonic_ns() - t0
             self.timing.tick_ms.add(dur * 1e-6)
-            if dur > self._dt_s * 1e9:
+            if self._step_timer is not None and dur > self._step_timer.timer_period_ns:
                 self.counters.overruns += 1
 
     def _timer_bookkeeping(self, t0: int) -> None:
         c = self.counters
         c.ticks += 1
-        period_ns = self._dt_s * 1e9
+        period_ns = self._step_timer.timer_period_ns
         next_call = t0 + self._step_timer.time_until_next_call()
         if self._prev_next_call_ns is not None:
             scheduled = self._prev_next_call_ns
@@ -278,11 +400,17 @@ class ClutchSimNode(Node):
             if missed > 0:
                 c.missed_ticks += missed
         if self._prev_tick_start_ns is not None:
-            self.timing.period_ms.add((t0 - self._prev_tick_start_ns) * 1e-6)
+            gap_ms = (t0 - self._prev_tick_start_ns) * 1e-6
+            self.timing.period_ms.add(gap_ms)
+            if gap_ms > D.STALL_S * 1e3:
+                c.stalls += 1
+                self._throttled_error(f"stall: {gap_ms:.0f} ms between ticks (plant advanced by it)")
+            if gap_ms > self.timing.longest_gap_ms:
+                self.timing.longest_gap_ms = gap_ms
         self._prev_next_call_ns = next_call
         self._prev_tick_start_ns = t0
 
-    def _on_clock(self, msg: ClockMsg) -> None:
+    def _on_clock(self, msg) -> None:
         """Sim-time step: advance by the clock increment, then sample and publish at t."""
         t0 = time.monotonic_ns()
         try:
@@ -291,26 +419,9 @@ class ClutchSimNode(Node):
             if inputs is None:
                 return
             self.counters.ticks += 1
-            plant = self._plant
             s0 = time.perf_counter_ns()
-            if not self._running or self._t_prev_ns is None:
-                self._start(inputs)
-            elif t_ns > self._t_prev_ns:
-                plant.advance((t_ns - self._t_prev_ns) * 1e-9)
-                self._last_step_reset = False
-                self._snapshot[:] = plant.state
-            elif t_ns == self._t_prev_ns:        # repeated time: recompute this step
-                self.counters.redone_steps += 1
-                self._tick_index -= 1
-                if self._last_step_reset:
-                    self._start(inputs)
-                else:
-                    plant.state[:] = self._snapshot
-            else:                                # clock went backwards: restart
-                self.counters.clock_jumps_back += 1
-                self._start(inputs)
-            self._t_prev_ns = t_ns
-            record = plant.sample(*inputs)
+            self._step_to(t_ns, inputs)
+            record = self._plant.sample(*inputs)
             self.timing.step_ms.add((time.perf_counter_ns() - s0) * 1e-6)
             self._publish(record, inputs, t_ns)
         except Exception as exc:
@@ -324,12 +435,14 @@ class ClutchSimNode(Node):
         self._snapshot[:] = self._plant.state
         self._last_step_reset = True
         self._tick_index = 0
+        self.timing.plant_time_s = 0.0
+        self.timing.wall_time_s = 0.0
         if not self._running:
             self._running = True
             self.get_logger().info("plant started" if self._ever_started else "all inputs received: plant started")
             self._ever_started = True
 
-    def _publish(self, record: np.ndarray, inputs: tuple[float, float, float], stamp_ns: int) -> bool:
+    def _publish(self, record, inputs: tuple[float, float, float], stamp_ns: int) -> bool:
         """Check and publish one sample; False (plant restarted, nothing published) when the
         record is not finite."""
         values = record.tolist()
@@ -349,11 +462,14 @@ class ClutchSimNode(Node):
         if index % self.params.publish_every:
             return True
         stamp = _time_msg(stamp_ns)
+        frame = self.params.frame_id
         torque_msg, temp_msg, st = self._torque_msg, self._temp_msg, self._state_msg
         torque_msg.data = values[K.O_TORQUE]
         temp_msg.header.stamp = stamp
+        temp_msg.header.frame_id = frame
         temp_msg.temperature = values[K.O_THETA]
         st.header.stamp = stamp
+        st.header.frame_id = frame
         st.applied_force, st.slip_speed, st.sump_temperature = inputs
         st.pack_force = values[K.O_FPACK]
         st.clutch_torque = values[K.O_TORQUE]
@@ -379,8 +495,8 @@ class ClutchSimNode(Node):
                         self.timing.latency_ms.add((done - ch.rx_ns) * 1e-6)
         return True
 
-    # ---- service -----------------------------------------------------------------------
-    def _on_reset(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+    # ---- service -------------------------------------------------------------------
+    def _on_reset(self, request, response):
         try:
             self.counters.resets += 1
             if self._force.value is None or self._slip.value is None or self._sump.value is None:
@@ -398,35 +514,43 @@ class ClutchSimNode(Node):
             response.message = f"reset failed: {exc}"
         return response
 
-    # ---- diagnostics -------------------------------------------------------------------
+    # ---- diagnostics ---------------------------------------------------------------
     def _on_diagnostics(self) -> None:
         try:
+            if not self._sim:   # keep wall-mode stamps on the system clock
+                offset, error = _clock_offset_ns(with_error=True)
+                drift = offset - self._stamp_offset_ns
+                if error < 100_000 and abs(drift) > STAMP_DRIFT_NS:
+                    self._stamp_offset_ns += drift
             self._pub_diag.publish(self.diagnostics())
         except Exception as exc:
             self._callback_error(exc)
 
-    def diagnostics(self) -> DiagnosticArray:
+    def diagnostics(self):
         mono, cpu, ticks = time.monotonic_ns(), time.process_time(), self.counters.ticks
         m0, c0, t0 = self._diag_last
         wall = max((mono - m0) * 1e-9, 1e-9)
         achieved = (ticks - t0) / wall
         cpu_pct = 100.0 * (cpu - c0) / wall
         self._diag_last = (mono, cpu, ticks)
-        name = self.get_fully_qualified_name()
+        name, hw = self.get_name(), self.get_fully_qualified_name()
         now_ns = mono if not self._sim else self._now_tick_ns
         statuses = [
-            D.inputs_status(name, name, self.inputs.values(), now_ns, self.params.input_timeout_s,
+            D.inputs_status(name, hw, self.inputs.values(), now_ns, self.params.input_timeout_s,
                             self._rejected_reported),
-            D.timing_status(name, name, self.counters, self.timing, sim_time=self._sim,
+            D.timing_status(name, hw, self.counters, self.timing, sim_time=self._sim,
                             rate_hz=self.params.rate_hz, achieved_hz=achieved, cpu_pct=cpu_pct),
-            D.plant_status(name, name, self.counters, self._last_record if self._running else None,
+            D.plant_status(name, hw, self.counters, self._last_record if self._running else None,
                            running=self._running, max_pack_force_n=self.max_pack_force_n),
         ]
         self._rejected_reported = {ch.name: ch.rejected for ch in self.inputs.values()}
         self.counters.mark_reported()
-        return D.array(self.get_clock().now().to_msg(), statuses)
+        stamp_ns = self.get_clock().now().nanoseconds
+        if stamp_ns <= 0:       # sim time before the first /clock: never stamp 1970
+            stamp_ns = time.time_ns()
+        return D.array(_time_msg(stamp_ns), statuses)
 
-    # ---- errors ------------------------------------------------------------------------
+    # ---- errors --------------------------------------------------------------------
     def _callback_error(self, exc: BaseException) -> None:
         self.counters.callback_errors += 1
         self._throttled_error(f"callback error ({self.counters.callback_errors} so far): "
@@ -439,10 +563,62 @@ class ClutchSimNode(Node):
             self.get_logger().error(text)
 
 
+
 def _make_executor(kind: str):
     if kind == "multi":
         return MultiThreadedExecutor(num_threads=2)
     return SingleThreadedExecutor()
+
+
+def _one_line(exc: BaseException) -> str:
+    """rcl errors span lines and end in ', at ./src/...c:123'; keep the reason."""
+    text = " ".join(str(exc).split()) or type(exc).__name__
+    for marker in (", at ./src", ", at /"):
+        cut = text.find(marker)
+        if cut > 0:
+            text = text[:cut]
+    return text
+
+
+def _check_ros_args(ros_args: list) -> Optional[str]:
+    """Reasons rcl would fail on (and log about on extra lines) checked first: a
+    --params-file without a readable file."""
+    import os
+
+    for k, arg in enumerate(ros_args):
+        if arg == "--params-file":
+            path = ros_args[k + 1] if k + 1 < len(ros_args) else None
+            if path is None or path.startswith("-"):
+                return "--params-file needs a file: --ros-args --params-file FILE.yaml"
+            if not os.path.isfile(path):
+                return f"parameter file not found: {path}"
+    return None
+
+
+class _ArgParser:
+    """argparse with one-line errors (exit 2) and a help listing topics and parameters."""
+
+    @staticmethod
+    def build():
+        import argparse
+
+        class Parser(argparse.ArgumentParser):
+            def error(self, message):
+                self.exit(2, f"clutch-sim-node: error: {message}\n")
+
+        parser = Parser(
+            prog="clutch-sim-node", formatter_class=argparse.RawDescriptionHelpFormatter,
+            usage="clutch-sim-node [--executor single|multi] [--ros-args ...]",
+            description="Virtual wet clutch on ROS 2 (node name clutch_sim): steps the clutch model at "
+                        "rate_hz in wall-clock time (late ticks made up: plant time keeps wall time), or once "
+                        "per /clock message with use_sim_time:=true.",
+            epilog=f"{TOPICS_HELP}\n\nparameters (--ros-args -p NAME:=VALUE or --params-file FILE; "
+                   f"all settable at runtime):\n{P.help_text()}\n\nexample:\n  {EXAMPLE}\n"
+                   "  clutch-sim play --bag BAG --clock --record out.mcap   # lock-step, with "
+                   "-p use_sim_time:=true")
+        parser.add_argument("--executor", choices=("single", "multi"), default="single",
+                            help="rclpy executor (default single)")
+        return parser
 
 
 def main(args=None) -> int:
@@ -450,44 +626,48 @@ def main(args=None) -> int:
 
     ``args``: like sys.argv (program name first). Besides ``--ros-args ...`` it takes
     ``--executor single|multi`` (default single). Exit code 1 with a one-line reason for
-    start-up errors (bad parameter file or value).
+    start-up errors (bad arguments, parameter file or value).
     """
-    import argparse
-
-    from rclpy.utilities import remove_ros_args
-
     argv = sys.argv if args is None else list(args)
-    parser = argparse.ArgumentParser(prog="clutch-sim-node", description="virtual wet clutch node")
-    parser.add_argument("--executor", choices=("single", "multi"), default="single")
-    opts = parser.parse_args(remove_ros_args(argv)[1:])
-    # SIGTERM like SIGINT: rclpy's handlers (installed by init) shut the context down and
-    # chain to these, so a signal during start-up also ends in a clean exit
-    signal.signal(signal.SIGINT, signal.default_int_handler)
-    signal.signal(signal.SIGTERM, signal.default_int_handler)
+    ros_at = argv.index("--ros-args") if "--ros-args" in argv else len(argv)
+    opts = _ArgParser.build().parse_args(argv[1:ros_at])   # --help / --executor; exits on errors
+    reason = _check_ros_args(argv[ros_at:])
+    if reason:
+        sys.stderr.write(f"clutch-sim-node: error: {reason}\n")
+        return 1
+    interrupted = []
+
+    def on_signal(signum, frame):  # SIGINT/SIGTERM: rclpy's handlers chain to this one
+        interrupted.append(signum)
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGINT, on_signal)
+    signal.signal(signal.SIGTERM, on_signal)
     node = None
     code = 0
     try:
-        rclpy.init(args=argv)
-        node = ClutchSimNode()
-        gc.freeze()   # start-up objects leave the collector's generations: shorter GC pauses
-        executor = _make_executor(opts.executor)
-        executor.add_node(node)
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except Exception as exc:
-        if rclpy.ok():  # a real start-up error; otherwise a signal shut rclpy down mid-call
-            sys.stderr.write(f"clutch-sim-node: error: {exc}\n")
-            code = 1
-    finally:
         try:
-            if node is not None:
-                node.destroy_node()
-            rclpy.try_shutdown()
-        except Exception:  # e.g. rcl_shutdown already called by rclpy's signal handler thread
+            rclpy.init(args=argv)
+            node = ClutchSimNode()
+            gc.freeze()   # start-up objects leave the collector's generations: shorter GC pauses
+            executor = _make_executor(opts.executor)
+            executor.add_node(node)
+            executor.spin()
+        except (KeyboardInterrupt, ExternalShutdownException):
             pass
-        except KeyboardInterrupt:
-            pass
+        except Exception as exc:
+            if not interrupted:   # a real start-up error (not a signal mid-call)
+                sys.stderr.write(f"clutch-sim-node: error: {_one_line(exc)}\n")
+                code = 1
+        finally:
+            try:
+                if node is not None:
+                    node.destroy_node()
+                rclpy.try_shutdown()
+            except Exception:  # e.g. rcl_shutdown already called by rclpy's signal handler thread
+                pass
+    except KeyboardInterrupt:
+        pass
     return code
 
 

@@ -1,15 +1,61 @@
 """The ROS parameters of the clutch_sim node, declared in one place.
 
-``PARAMETERS`` holds every parameter with its default and descriptor; ``declare(node)``
-declares them all and returns the values as a typed ``NodeParams``. ``use_sim_time`` is
-rclpy's built-in parameter (declared by rclpy itself) and is only read here.
+``SPEC`` lists every parameter (name, default, type, range, what it does, how a runtime change
+applies) without importing ROS, so ``clutch-sim-node --help`` can print it. ``declare(node)``
+declares them all with descriptors (ranges as FloatingPointRange / IntegerRange) and returns the
+values as a ``NodeParams``; ``check_change(name, value)`` is the node's on-set validation.
+
+Every parameter applies at runtime (``ros2 param set`` / the SetParameters service) or the
+change is refused with a reason. Floats accept integers (a YAML ``rate_hz: 1000`` is stored as
+1000.0 and range-checked like a float). ``use_sim_time`` is rclpy's own parameter: the node
+switches between its wall-clock timer and /clock stepping when it changes.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, fields, replace
+from typing import Optional
 
-from rcl_interfaces.msg import IntegerRange, ParameterDescriptor, ParameterType
-from rclpy.node import Node
+
+@dataclass(frozen=True)
+class Spec:
+    name: str
+    default: object
+    kind: type                      # float | int | str | bool
+    range: Optional[tuple] = None   # (lo, hi), inclusive
+    description: str = ""
+    runtime: str = ""               # what a change at runtime does
+
+
+SPEC: tuple[Spec, ...] = (
+    Spec("rate_hz", 1000.0, float, (1.0, 10000.0),
+         "model step and publish tick in wall-clock mode, Hz",
+         "timer period changes at once"),
+    Spec("publish_every", 1, int, (1, 100000),
+         "publish the outputs every N-th tick (the model steps every tick)",
+         "applies from the next tick"),
+    Spec("clutch_params_file", "", str, None,
+         'clutch parameter YAML (schema of config/reference_clutch.yaml); "" = the shipped '
+         "reference clutch RC-1",
+         "file is loaded and checked first (refused with the loader's reason); the plant then "
+         "restarts with the new model"),
+    Spec("input_timeout_s", 0.1, float, (1e-4, 3600.0),
+         "an input without a valid message for this long is stale (diagnostics WARN, ERROR after "
+         "10x); a stale applied force counts as 0 N, s",
+         "applies from the next tick"),
+    Spec("lock_slip_rad_s", 0.001, float, (0.0, 1000.0),
+         "|slip| below this = locked clutch (static torque capacity), rad/s",
+         "applies from the next tick (plant state kept)"),
+    Spec("frame_id", "clutch", str, None,
+         "header.frame_id of the stamped outputs (pack_temperature, clutch_state)",
+         "applies from the next published sample"),
+    Spec("use_sim_time", False, bool, None,
+         "step once per /clock message (lock-step, plant time = /clock time) instead of the "
+         "wall-clock timer",
+         "switches the stepping (timer <-> /clock); the plant state is kept"),
+)
+SPEC_BY_NAME = {s.name: s for s in SPEC}
+DECLARED = tuple(s.name for s in SPEC if s.name != "use_sim_time")   # use_sim_time: rclpy's
 
 
 @dataclass(frozen=True)
@@ -19,65 +65,120 @@ class NodeParams:
     clutch_params_file: str = ""
     input_timeout_s: float = 0.1
     lock_slip_rad_s: float = 0.001
+    frame_id: str = "clutch"
     use_sim_time: bool = False
 
     @property
     def period_s(self) -> float:
         return 1.0 / self.rate_hz
 
-
-_RANGES = {"rate_hz": (1.0, 10000.0), "input_timeout_s": (1e-4, 3600.0), "lock_slip_rad_s": (0.0, 1000.0)}
-
-
-def _float(desc: str) -> ParameterDescriptor:
-    # dynamic typing: a YAML `rate_hz: 1000` (integer) is accepted and converted to float;
-    # the range is checked in check() (rclpy skips floating_point_range for integers)
-    return ParameterDescriptor(description=desc, read_only=True, dynamic_typing=True)
+    def with_value(self, name: str, value) -> "NodeParams":
+        return replace(self, **{name: SPEC_BY_NAME[name].kind(value)})
 
 
-# name -> (default, descriptor). Read-only: the node reads them once at start-up.
-PARAMETERS: dict[str, tuple[object, ParameterDescriptor]] = {
-    "rate_hz": (NodeParams.rate_hz, _float(
-        "model step and publish tick in wall-clock mode, Hz (dt = 1/rate_hz)")),
-    "publish_every": (NodeParams.publish_every, ParameterDescriptor(
-        type=ParameterType.PARAMETER_INTEGER, read_only=True,
-        description="publish the outputs every N-th tick (the model steps every tick)",
-        integer_range=[IntegerRange(from_value=1, to_value=100000, step=1)])),
-    "clutch_params_file": (NodeParams.clutch_params_file, ParameterDescriptor(
-        type=ParameterType.PARAMETER_STRING, read_only=True,
-        description='clutch parameter YAML (schema of config/reference_clutch.yaml); "" = the '
-                    "shipped reference clutch RC-1")),
-    "input_timeout_s": (NodeParams.input_timeout_s, _float(
-        "an input without a message for this long is stale (diagnostics WARN, ERROR after 10x); "
-        "a stale applied force counts as 0 N, s")),
-    "lock_slip_rad_s": (NodeParams.lock_slip_rad_s, _float(
-        "|slip| below this = locked clutch (static torque capacity), rad/s")),
-}
+assert [f.name for f in fields(NodeParams)] == [s.name for s in SPEC]
 
 
-def declare(node: Node) -> NodeParams:
-    """Declare every parameter of PARAMETERS on ``node`` and return their values."""
-    for name, (default, descriptor) in PARAMETERS.items():
-        node.declare_parameter(name, default, descriptor)
-    values = {name: node.get_parameter(name).value for name in PARAMETERS}
-    for name in _RANGES:
-        if isinstance(values[name], bool) or not isinstance(values[name], (int, float)):
-            raise ValueError(f"parameter {name} must be a number, got {values[name]!r}")
-    use_sim_time = bool(node.get_parameter("use_sim_time").value)
-    params = NodeParams(
-        rate_hz=float(values["rate_hz"]), publish_every=int(values["publish_every"]),
-        clutch_params_file=str(values["clutch_params_file"] or ""),
-        input_timeout_s=float(values["input_timeout_s"]),
-        lock_slip_rad_s=float(values["lock_slip_rad_s"]), use_sim_time=use_sim_time)
+def check_change(name: str, value) -> Optional[str]:
+    """None when ``value`` is acceptable for parameter ``name``, else the reason (one line)."""
+    spec = SPEC_BY_NAME.get(name)
+    if spec is None:
+        return None
+    if spec.kind is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            return f"{name} must be a number, got {value!r}"
+    elif spec.kind is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            return f"{name} must be an integer, got {value!r}"
+    elif not isinstance(value, spec.kind):
+        return f"{name} must be a {spec.kind.__name__}, got {value!r}"
+    if spec.range is not None:
+        lo, hi = spec.range
+        if not (isinstance(value, (int, float)) and math.isfinite(value) and lo <= value <= hi):
+            return f"{name} must be in [{lo:g}, {hi:g}], got {value!r}"
+    return None
+
+
+def check(params: NodeParams) -> None:
+    """Raise ValueError for an invalid value."""
+    for spec in SPEC:
+        reason = check_change(spec.name, getattr(params, spec.name))
+        if reason:
+            raise ValueError(f"parameter {reason}")
+
+
+def descriptor(spec: Spec):
+    """The rcl_interfaces ParameterDescriptor of one parameter."""
+    from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType
+
+    text = f"{spec.description}. At runtime: {spec.runtime}"
+    if spec.kind is float:
+        # dynamic typing so that an integer (YAML `1000`) is accepted; declare() and the node's
+        # pre-set callback turn it into a double, which rclpy then checks against the range
+        return ParameterDescriptor(
+            description=text, dynamic_typing=True,
+            additional_constraints=f"number in [{spec.range[0]:g}, {spec.range[1]:g}]; integers accepted",
+            floating_point_range=[FloatingPointRange(from_value=float(spec.range[0]),
+                                                     to_value=float(spec.range[1]), step=0.0)])
+    if spec.kind is int:
+        return ParameterDescriptor(description=text, type=ParameterType.PARAMETER_INTEGER,
+                                   integer_range=[IntegerRange(from_value=spec.range[0],
+                                                               to_value=spec.range[1], step=1)])
+    return ParameterDescriptor(description=text, type=ParameterType.PARAMETER_STRING)
+
+
+def as_double(parameters: list) -> list:
+    """Pre-set callback: integers given for float parameters become doubles (so the
+    descriptor's FloatingPointRange applies and the stored type is double)."""
+    from rclpy.parameter import Parameter
+
+    out = []
+    for p in parameters:
+        spec = SPEC_BY_NAME.get(p.name)
+        if (spec is not None and spec.kind is float and p.type_ == Parameter.Type.INTEGER):
+            p = Parameter(p.name, Parameter.Type.DOUBLE, float(p.value))
+        out.append(p)
+    return out
+
+
+def declare(node) -> NodeParams:
+    """Declare every parameter of SPEC on ``node`` (integers for floats become doubles) and
+    return their values. Raises ValueError with a one-line reason for a bad value."""
+    from rclpy.parameter import Parameter
+
+    from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
+
+    for name in DECLARED:
+        spec = SPEC_BY_NAME[name]
+        try:
+            node.declare_parameter(name, spec.default, descriptor(spec))
+        except (InvalidParameterTypeException, InvalidParameterValueException) as exc:
+            text = " ".join(str(exc).split())
+            reason = text.split("Reason: ", 1)[-1].rsplit(":", 1)[0] if "Reason: " in text else text
+            raise ValueError(f"parameter {name} refused: {reason}") from None
+    converted = as_double([node.get_parameter(n) for n in DECLARED])
+    changed = [p for p in converted if p.type_ == Parameter.Type.DOUBLE
+               and node.get_parameter(p.name).type_ != Parameter.Type.DOUBLE]
+    for p in converted:
+        reason = check_change(p.name, p.value)
+        if reason:
+            raise ValueError(f"parameter {reason}")
+    if changed:
+        result = node.set_parameters_atomically(changed)
+        if not result.successful:
+            raise ValueError(f"parameters: {result.reason}")
+    values = {n: node.get_parameter(n).value for n in DECLARED}
+    values["use_sim_time"] = bool(node.get_parameter("use_sim_time").value)
+    params = NodeParams(**{n: SPEC_BY_NAME[n].kind(v) for n, v in values.items()})
     check(params)
     return params
 
 
-def check(params: NodeParams) -> None:
-    """Raise ValueError for out-of-range values."""
-    for name, (lo, hi) in _RANGES.items():
-        value = getattr(params, name)
-        if not (lo <= value <= hi):
-            raise ValueError(f"parameter {name} must be in [{lo:g}, {hi:g}], got {value}")
-    if params.publish_every < 1:
-        raise ValueError(f"parameter publish_every must be >= 1, got {params.publish_every}")
+def help_text() -> str:
+    """The parameter section of ``clutch-sim-node --help``."""
+    lines = []
+    for s in SPEC:
+        rng = f" in [{s.range[0]:g}, {s.range[1]:g}]" if s.range else ""
+        lines.append(f"  {s.name} ({s.kind.__name__}{rng}, default {s.default!r})")
+        lines.append(f"      {s.description}; at runtime: {s.runtime}")
+    return "\n".join(lines)

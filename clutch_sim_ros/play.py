@@ -144,6 +144,8 @@ class Player:
                 raise PlayError("the clutch_sim node exited")
             if any(p.get_subscription_count() == 0 for p in self.pubs.values()):
                 return False
+            if self.recorder is not None and not self.recorder.matched():
+                return False
             if self.clock_mode:
                 if self.clock_pub.get_subscription_count() == 0:
                     return False
@@ -153,6 +155,8 @@ class Player:
 
         if not self._spin_until(ready, self.discovery_timeout_s):
             what = "its inputs" if not self.clock_mode else "its inputs, /clock and clutch_state"
+            if self.recorder is not None:
+                what += " and its outputs for recording"
             raise PlayError(f"no clutch_sim node found in namespace {self.ns or '/'} ({what} not "
                             f"matched within {self.discovery_timeout_s:g} s)"
                             + ("; lock-step needs the node with use_sim_time:=true" if self.clock_mode else ""))
@@ -198,12 +202,15 @@ class Player:
             force_msg.data, slip_msg.data = f, w
             sump_msg = self._temperature(s, t)
             clock_msg.clock.sec, clock_msg.clock.nanosec = divmod(t, 1_000_000_000)
+            torque_before = self.recorder.counts[f"{self.ns}/clutch_torque"] if self.recorder is not None else 0
             for attempt in range(self.max_attempts):
                 self._awaiting, self._answer = t, None
                 pf.publish(force_msg)
                 pw.publish(slip_msg)
                 ps.publish(sump_msg)
                 self._sim_now_ns = t
+                if self.recorder is not None:
+                    self.recorder.open_gate()     # the data starts at the first /clock
                 self.clock_pub.publish(clock_msg)
                 timeout = self.ack_timeout_s * (1 if attempt < 3 else 3)
                 ok = self._spin_until(lambda: self._answer is not None, timeout)
@@ -220,19 +227,20 @@ class Player:
             pack[k] = a.pack_temperature
             self._awaiting = None
             if self.recorder is not None:  # the other outputs of this step, before the next clock
-                self._flush_recorder()
+                self._flush_recorder(t, torque_before)
             if bar is not None:
                 bar.update(1)
         return result
 
-    def _flush_recorder(self, timeout_s: float = 0.5) -> None:
-        """Wait until the recorder has written this step's three outputs, so they are logged
-        at this step's time (the player's own clutch_state subscription may run first)."""
-        counts = self.recorder.counts
-        topics = [f"{self.ns}/{name}" for name in ("clutch_torque", "pack_temperature", "clutch_state")]
-        target = self._step_count + 1
-        self._spin_until(lambda: all(counts[t] >= target for t in topics), timeout_s)
-        self._step_count = min(counts[t] for t in topics)
+    def _flush_recorder(self, t_ns: int, torque_before: int, timeout_s: float = 30.0) -> None:
+        """Wait until the recorder has taken this step's outputs (clutch_state and
+        pack_temperature stamped t_ns, one more clutch_torque), so they are logged at this
+        step's time before the next /clock. They are reliable and already answered for by
+        clutch_state, so the wait ends at once unless the machine is very busy."""
+        rec = self.recorder
+        state, temp, torque = (f"{self.ns}/{n}" for n in ("clutch_state", "pack_temperature", "clutch_torque"))
+        self._spin_until(lambda: (rec.last_stamp.get(state) == t_ns and rec.last_stamp.get(temp) == t_ns
+                                  and rec.counts[torque] > torque_before), timeout_s)
 
     # ---- real time ---------------------------------------------------------------------
     def play_realtime(self, path, topics=None, bar=None) -> BagResult:
@@ -253,6 +261,8 @@ class Player:
                     self.executor.spin_once(timeout_sec=left - 0.001)
                 elif left > 0.0004:
                     time.sleep(left - 0.0003)
+            if self.recorder is not None:
+                self.recorder.open_gate()         # the data starts with the first input sent
             if m.topic == "sump_temperature":
                 self.pubs["sump_temperature"].publish(self._temperature(m.value, m.stamp_ns, m.frame_id, m.variance))
             else:
@@ -309,14 +319,14 @@ def play(paths, namespace: str = "/clutch", *, clock: bool = False, rate: float 
             from clutch_sim_ros.record import Recorder
 
             log_time = (lambda: player.sim_now_ns) if clock else (lambda: time.time_ns())
-            recorder = Recorder(node, record_out, namespace, log_time=log_time, overwrite=overwrite)
+            recorder = Recorder(node, record_out, namespace, log_time=log_time, overwrite=overwrite, gated=True)
             player.recorder = recorder
         try:
             result = player.play(paths, topics)
         except (KeyboardInterrupt, ExternalShutdownException):
             raise KeyboardInterrupt from None
-        if recorder is not None:  # the tail: outputs (and diagnostics) still in flight
-            end = time.monotonic() + (0.3 if clock else 0.6)
+        if recorder is not None and not clock:  # the tail: outputs still in flight
+            end = time.monotonic() + 0.6
             while time.monotonic() < end:
                 executor.spin_once(timeout_sec=0.05)
         return result

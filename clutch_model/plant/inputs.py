@@ -80,6 +80,12 @@ class InputChannel:
             self.last_good_ns = t_ns
             self._pending = False
 
+    def rebase(self, t_ns: int) -> None:
+        """The time base changed (wall clock <-> sim time): a held value counts as received
+        at ``t_ns`` of the new base (its age restarts instead of comparing two clocks)."""
+        if self.last_good_ns is not None:
+            self.last_good_ns = t_ns
+
     def age_s(self, now_ns: int) -> Optional[float]:
         """Seconds since the last good value, None before the first one."""
         if self.last_good_ns is None:

@@ -11,7 +11,10 @@ def add_parser(sub):
     p = sub.add_parser(
         "record", help="record the node's outputs (torque, pack temperature, state, diagnostics) to MCAP",
         description="Record NS/clutch_torque, NS/pack_temperature, NS/clutch_state and /diagnostics "
-                    "to an MCAP rosbag2 with message schemas, until --duration elapses or Ctrl-C.")
+                    "to an MCAP rosbag2 with message schemas, until --duration elapses or Ctrl-C (which ends "
+                    "the recording normally: what was delivered is written, the bag is closed, exit 0). "
+                    "Messages are queued to a writer thread (reliable QoS, 1000 deep), so recording keeps up "
+                    "with the node at 1 kHz.")
     p.add_argument("--out", required=True, metavar="OUT.mcap",
                    help="OUT.mcap = bare MCAP file; any other name = rosbag2 directory (must not exist)")
     add_params_option(p)  # accepted for uniformity (not used)
@@ -34,7 +37,10 @@ def run(args) -> int:
         raise DataError(f"ROS 2 (rclpy, clutch_msgs) is not available: {exc}") from None
     result = record(args.out, args.namespace, args.duration, use_sim_time=args.use_sim_time)
     total = sum(result["counts"].values())
-    print(f"recorded {total} messages -> {result['out']}")
+    how = " (stopped by Ctrl-C; the bag is complete)" if result.get("interrupted") else ""
+    print(f"recorded {total} messages -> {result['out']}{how}")
+    if result.get("skipped"):
+        print(f"  {result['skipped']} messages before the first /clock not recorded")
     for topic, n in result["counts"].items():
         print(f"  {topic}: {n}")
     return 0

@@ -100,13 +100,18 @@ class Client:
         while time.monotonic() < end:
             self.executor.spin_once(timeout_sec=min(0.01, max(0.0, end - time.monotonic())))
 
-    def spin_until(self, cond, timeout: float, step=None) -> bool:
+    def spin_until(self, cond, timeout: float, step=None, step_period: float = 0.01) -> bool:
+        """Spin until ``cond()`` (True) or ``timeout`` s (False: a generous deadline, never a
+        timing assertion); ``step()`` is called every ``step_period`` s meanwhile."""
         end = time.monotonic() + timeout
+        next_step = 0.0
         while not cond():
-            if time.monotonic() > end:
+            now = time.monotonic()
+            if now > end:
                 return False
-            if step is not None:
+            if step is not None and now >= next_step:
                 step()
+                next_step = now + step_period
             self.executor.spin_once(timeout_sec=0.005)
         return True
 
@@ -167,14 +172,16 @@ class Io:
         self.client.spin_for(0.3)
 
     def node_status(self, kind: str, fqn: str):
-        """The latest DiagnosticStatus '<fqn>: <kind>' received, or None."""
+        """The latest DiagnosticStatus '<node name>: <kind>' of the node ``fqn`` (its
+        hardware_id) received, or None."""
+        name = fqn.rsplit("/", 1)[-1]
         for arr in reversed(self.diags):
             for st in arr.status:
-                if st.name == f"{fqn}: {kind}":
+                if st.name == f"{name}: {kind}" and st.hardware_id == fqn:
                     return st
         return None
 
-    def wait_status(self, kind: str, fqn: str, pred, timeout: float = 5.0):
+    def wait_status(self, kind: str, fqn: str, pred, timeout: float = 30.0):
         from clutch_sim_ros.diagnostics import values_of
 
         found = []

@@ -68,7 +68,7 @@ def test_force_step_lockstep_equals_offline_simulator(client, sim_node):
     np.testing.assert_allclose([m.energy for m in states], off.energy_j, rtol=RTOL, atol=ATOL)
     assert torque[100] > 5 * torque[30] > 0 and torque[-1] < 0       # the step shows, sign follows slip
     # clutch_torque and pack_temperature topics carry the same samples
-    client.spin_for(0.2)
+    assert client.spin_until(lambda: len(io.torques) >= n and len(io.temps) >= n, 30.0)
     tq = np.array([m.data for m in io.torques])
     assert tq.size == n and np.array_equal(tq, torque)
     assert np.array_equal([m.temperature for m in io.temps], pack)
@@ -139,6 +139,9 @@ def test_play_clock_and_record_equal_offline_replay(domain_id, tmp_path):
                                off.sim.pack_temperature_c, rtol=RTOL, atol=ATOL)
     np.testing.assert_array_equal([m.applied_force for _, m in states], off.campaign.force)
     assert "/diagnostics" in rec
+    # nothing logged before the data starts (no 1970 log times), nothing after it ends
+    all_log = [t for msgs in rec.values() for t, _ in msgs]
+    assert min(all_log) >= rows[0] and max(all_log) <= rows[-1]
 
 
 def test_live_replay_returns_offline_rmse(domain_id, tmp_path):
@@ -158,3 +161,45 @@ def test_live_replay_returns_offline_rmse(domain_id, tmp_path):
         assert (run["bag"], run["rows"]) == (name, n) and run["rmse_nm"] == pytest.approx(rmse, rel=1e-9)
     rec = _read_recording(tmp_path / "out" / "live.mcap")
     assert len(rec["/live/clutch_state"]) == summary["rows"]
+
+
+def test_record_process_records_play_clock_losslessly(client, domain_id, tmp_path):
+    """`clutch-sim record --use-sim-time` in its own process while `clutch-sim play --clock`
+    drives a sim-time node: every step's clutch_state is in the bag (none lost), nothing is
+    logged before the data starts (no 1970 log times), and Ctrl-C leaves a complete bag."""
+    import signal
+
+    from rosbags.highlevel import AnyReader
+
+    from clutch_model.formats.bag_messages import read_run, row_times_ns
+
+    bag = write_test_bag(tmp_path / "run_r", 2.0, seed=6, start_ns=T0)
+    rows = row_times_ns(read_run(bag))
+    node = NodeProcess(domain_id, ["-r", "__ns:=/rigR", "-p", "use_sim_time:=true"], tmp_path)
+    out = tmp_path / "rec.mcap"
+    env = subprocess_env(domain_id)
+    rec = subprocess.Popen([sys.executable, "-m", "clutch_sim.cli", "record", "--out", str(out), "--namespace", "/rigR",
+                            "--use-sim-time"], env=env, cwd=str(REPO), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                           text=True)
+    try:
+        assert client.spin_until(lambda: client.node.count_subscribers("/rigR/clutch_state") >= 1
+                                 and client.node.count_publishers("/rigR/clutch_state") >= 1, 60.0)
+        client.spin_for(2.0)                 # the node's publishers match the recorder too
+        play = subprocess.run([sys.executable, "-m", "clutch_sim.cli", "play", "--bag", str(bag), "--clock",
+                               "--namespace", "/rigR"], env=env, cwd=str(REPO), capture_output=True, text=True,
+                              timeout=300)
+        assert play.returncode == 0, play.stderr + node.log()
+        client.spin_for(1.0)
+        rec.send_signal(signal.SIGINT)
+        _, rec_err = rec.communicate(timeout=60)
+    finally:
+        if rec.poll() is None:
+            rec.kill()
+        assert node.stop() == 0, node.log()
+    assert rec.returncode == 0 and "Traceback" not in rec_err, rec_err
+    with AnyReader([out]) as reader:
+        msgs = [(c.topic, t, reader.deserialize(raw, c.msgtype)) for c, t, raw in reader.messages()]
+    stamps = [stamp_ns(m.header.stamp) for topic, _, m in msgs if topic == "/rigR/clutch_state"]
+    assert set(stamps) == set(int(t) for t in rows)                  # every step recorded
+    assert sum(1 for topic, _, _ in msgs if topic == "/rigR/clutch_torque") >= len(rows)
+    assert min(t for _, t, _ in msgs) >= rows[0]                     # nothing before the data

@@ -42,16 +42,27 @@ def test_input_channel_holds_last_good_value_and_goes_stale():
 
 
 def test_parameter_defaults_and_ranges():
-    from clutch_sim_ros.params import PARAMETERS, NodeParams, check
+    from clutch_sim_ros.params import SPEC, NodeParams, check, check_change, descriptor
 
-    assert {k: v[0] for k, v in PARAMETERS.items()} == {
+    assert {s.name: s.default for s in SPEC} == {
         "rate_hz": 1000.0, "publish_every": 1, "clutch_params_file": "", "input_timeout_s": 0.1,
-        "lock_slip_rad_s": 0.001}
+        "lock_slip_rad_s": 0.001, "frame_id": "clutch", "use_sim_time": False}
     check(NodeParams())
     for bad in (dict(rate_hz=0.0), dict(rate_hz=math.nan), dict(publish_every=0),
                 dict(input_timeout_s=-1.0), dict(lock_slip_rad_s=-0.1)):
         with pytest.raises(ValueError):
             check(NodeParams(**bad))
+    assert check_change("rate_hz", 500) is None                  # integers accepted for floats
+    assert "number" in check_change("rate_hz", "fast") and "[1, 10000]" in check_change("rate_hz", 2e4)
+    assert "integer" in check_change("publish_every", 2.5)
+    # every numeric parameter carries its range in the descriptor
+    for s in SPEC:
+        if s.kind is float:
+            (r,) = descriptor(s).floating_point_range
+            assert (r.from_value, r.to_value) == s.range and descriptor(s).dynamic_typing
+        elif s.kind is int:
+            (r,) = descriptor(s).integer_range
+            assert (r.from_value, r.to_value) == s.range
 
 
 def test_diagnostics_levels():
