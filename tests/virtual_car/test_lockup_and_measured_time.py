@@ -31,7 +31,7 @@ def precision_recall(paths, runs, **options):
 
 
 def test_kernel_lock_reports_static_capacity_with_last_sign(tmp_path):
-    """CONTRACT Lock-up: |slip| < lock tolerance -> static capacity (asperity torque with
+    """Lock-up (docs/model.md): |slip| < lock tolerance -> static capacity (asperity torque with
     mu_f at w = 0, no hydrodynamic part), sign of the last slip above the tolerance."""
     model = load_model(None)
     t = np.arange(0, 2.0, 0.005)
