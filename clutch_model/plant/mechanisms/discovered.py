@@ -34,6 +34,7 @@ from clutch_model.errors import ParamsError
 from clutch_model.plant import kernels as K
 from clutch_model.plant import layout as P
 from clutch_model.plant.mechanisms.base import Mechanism
+from clutch_model.plant.mechanisms.friction_degradation import FrictionDegradation
 
 SIGNALS = {
     "pressure": K.SIG_PRESSURE,
@@ -135,9 +136,5 @@ class Discovered(Mechanism):
             p[base + 3] = tau
             p[base + 4] = c
 
-    def energy_at(self, time_ns: int) -> float:
-        energy = 0.0
-        for t, e in self.values.get("energy_history") or []:
-            if t <= time_ns:
-                energy = e
-        return energy
+    # campaign energy known at or before time_ns, read from energy_history as friction_degradation does
+    energy_at = FrictionDegradation.energy_at
