@@ -40,10 +40,10 @@ S_H, S_THETA, S_FHYST, S_FPACK, S_ENERGY, S_SIGN, S_POWER, S_FLAG, S_FTARGET = r
 S_ANGLE, S_FPREV, S_DT, S_PPREV, S_TERM0 = 9, 10, 11, 12, 13
 N_STATE = S_TERM0 + P.MAX_DISCOVERED_TERMS
 
-# signals the discovered terms are built from (clutch_model.discovery.terms names them)
-(SIG_NONE, SIG_PRESSURE, SIG_PACK_TEMP, SIG_SLIP_ABS, SIG_SLIP_POWER, SIG_ENERGY,
- SIG_FORCE_RATE, SIG_SIN_ANGLE, SIG_COS_ANGLE, SIG_SLIP, SIG_SLIP_SIGN) = range(11)
-TERM_FRICTION, TERM_TORQUE = 1, 2
+# signals the discovered terms are built from (defined in layout, numba-free)
+from clutch_model.plant.layout import (SIG_NONE, SIG_PRESSURE, SIG_PACK_TEMP, SIG_SLIP_ABS,  # noqa: E402
+                                       SIG_SLIP_POWER, SIG_ENERGY, SIG_FORCE_RATE, SIG_SIN_ANGLE,
+                                       SIG_COS_ANGLE, SIG_SLIP, SIG_SLIP_SIGN, TERM_FRICTION, TERM_TORQUE)
 THETA_REF_C = 60.0
 DISC_FACTOR_MIN = 0.05
 

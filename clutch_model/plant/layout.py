@@ -25,3 +25,10 @@ N_PARAMS = DISC_SLOTS + DISC_SLOT * MAX_DISCOVERED_TERMS
 N_FRICTION_COEFFS = 20
 DEFAULT_LOCK_SLIP_RAD_S = 1e-3
 
+
+
+# signals the discovered terms are built from (clutch_model.discovery.terms names them) and
+# the two kinds of term (a multiplier on mu_f, an additive torque); the kernels read these
+(SIG_NONE, SIG_PRESSURE, SIG_PACK_TEMP, SIG_SLIP_ABS, SIG_SLIP_POWER, SIG_ENERGY,
+ SIG_FORCE_RATE, SIG_SIN_ANGLE, SIG_COS_ANGLE, SIG_SLIP, SIG_SLIP_SIGN) = range(11)
+TERM_FRICTION, TERM_TORQUE = 1, 2

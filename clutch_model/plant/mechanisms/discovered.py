@@ -31,8 +31,8 @@ import re
 import numpy as np
 
 from clutch_model.errors import ParamsError
-from clutch_model.plant import kernels as K
 from clutch_model.plant import layout as P
+from clutch_model.plant import layout as K   # the signal and term codes the kernels read
 from clutch_model.plant.mechanisms.base import Mechanism
 from clutch_model.plant.mechanisms.friction_degradation import FrictionDegradation
 
