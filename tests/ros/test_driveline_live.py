@@ -51,17 +51,50 @@ class Rig:
 
 
 def _wait_inputs_arrived(rig: Rig, fqn: str, force, tau_a, tau_b) -> None:
-    """Wait until the node reports (its /diagnostics inputs status) these held inputs: the event
-    that the next /clock step uses them."""
+    """Send the held inputs (again every 0.1 s: the node's inputs are best effort) until the node
+    reports them on /diagnostics (inputs status): the event that the next /clock step uses them."""
+    from clutch_sim_ros.diagnostics import values_of
+
     want = {"applied_force.value": force, "sump_temperature.value": SUMP_C,
             "torque_a.value": tau_a, "torque_b.value": tau_b}
 
-    def arrived(_, values):
+    def arrived():
+        st = rig.io.node_status("inputs", fqn)
+        values = values_of(st) if st is not None else {}
         return all(k in values and float(values[k]) == v for k, v in want.items())
 
-    st = rig.io.wait_status("inputs", fqn, arrived, timeout=60.0)
-    assert st is not None and arrived(st, {kv.key: kv.value for kv in st.values}), \
+    rig.io.diags.clear()
+    assert rig.io.client.spin_until(arrived, 60.0, step=lambda: rig.send(force, tau_a, tau_b), step_period=0.1), \
         f"inputs {want} not reported by the node"
+
+
+def _lockstep(client, rig: Rig, node, fqn: str, phases, k0: int) -> dict:
+    """Drive the node through ``phases`` one /clock step (DT_NS) at a time from step ``k0``:
+    the inputs of a phase are sent and seen arrived (held), then each step's outputs awaited."""
+    for v in rig.out.values():
+        v.clear()
+    rig.io.torques.clear()
+    rig.io.states.clear()
+    force, tau_a, tau_b, stamps, states = [], [], [], [], []
+    k = 0
+    for seconds, f, a, b in phases:
+        _wait_inputs_arrived(rig, fqn, f, a, b)
+        for _ in range(int(round(seconds * 1e9 / DT_NS))):
+            t = T0 + (k0 + k) * DT_NS
+            rig.io.clock(t)
+
+            def answered():
+                return (any(stamp_ns(m.header.stamp) == t for m in rig.io.states)
+                        and all(len(v) >= k + 1 for v in rig.out.values()) and len(rig.io.torques) >= k + 1)
+
+            assert client.spin_until(answered, 30.0), f"no outputs for step {k0 + k}\n" + node.log()
+            (st,) = [m for m in rig.io.states if stamp_ns(m.header.stamp) == t]
+            rig.io.states.clear()
+            states.append(st)
+            force.append(f), tau_a.append(a), tau_b.append(b), stamps.append(t)
+            k += 1
+    return {"force": np.array(force), "tau_a": np.array(tau_a), "tau_b": np.array(tau_b), "stamps": stamps,
+            "states": states}
 
 
 @pytest.fixture(scope="module")
@@ -95,40 +128,28 @@ def test_node_publishes_slip_speed_and_does_not_subscribe_to_it(client, drivelin
     assert node.count_publishers(f"{NS}/slip_speed") == 1
 
 
-def test_rig_over_dds_in_lockstep_equals_offline(client, driveline_node):
-    rig = Rig(client)
-    fqn = f"{NS}/clutch_sim"
-    ready = lambda: (all(p.get_subscription_count() > 0 for p in (rig.io.pf, rig.io.ps, rig.pa, rig.pb,  # noqa: E731
-                                                                  rig.io.pclock))
+@pytest.fixture(scope="module")
+def rig(client, driveline_node):
+    r = Rig(client)
+    ready = lambda: (all(p.get_subscription_count() > 0 for p in (r.io.pf, r.io.ps, r.pa, r.pb,  # noqa: E731
+                                                                  r.io.pclock))
                      and client.node.count_publishers(f"{NS}/speed_b") > 0)
     assert client.spin_until(ready, 60.0), driveline_node.log()
+    return r
 
-    force, tau_a, tau_b, stamps, states, torques = [], [], [], [], [], []
-    k = 0
-    for seconds, f, a, b in PHASES:
-        rig.send(f, a, b)
-        _wait_inputs_arrived(rig, fqn, f, a, b)
-        for _ in range(int(round(seconds * 1e9 / DT_NS))):
-            t = T0 + k * DT_NS
-            rig.io.clock(t)
 
-            def answered():
-                return (any(stamp_ns(m.header.stamp) == t for m in rig.io.states)
-                        and all(len(v) >= k + 1 for v in rig.out.values()) and len(rig.io.torques) >= k + 1)
+def test_rig_over_dds_in_lockstep_equals_offline(client, driveline_node, rig):
+    fqn = f"{NS}/clutch_sim"
 
-            assert client.spin_until(answered, 30.0), f"no outputs for step {k}\n" + driveline_node.log()
-            (st,) = [m for m in rig.io.states if stamp_ns(m.header.stamp) == t]
-            rig.io.states.clear()
-            states.append(st)
-            force.append(f), tau_a.append(a), tau_b.append(b), stamps.append(t)
-            k += 1
+    run = _lockstep(client, rig, driveline_node, fqn, PHASES, 0)
+    force, tau_a, tau_b, stamps, states = run["force"], run["tau_a"], run["tau_b"], run["stamps"], run["states"]
+    k = len(stamps)
     n = k
     assert all(len(v) == n for v in rig.out.values()) and len(rig.io.torques) == n
     slip = np.array(rig.out["slip_speed"])
     wa, wb = np.array(rig.out["speed_a"]), np.array(rig.out["speed_b"])
     torque = np.array([m.data for m in rig.io.torques])
     locked = np.array([st.locked for st in states])
-    force, tau_a, tau_b = np.array(force), np.array(tau_a), np.array(tau_b)
     # clutch_state carries the inputs the plant used and the plant's slip
     np.testing.assert_array_equal([st.applied_force for st in states], force)
     np.testing.assert_array_equal([st.slip_speed for st in states], slip)
@@ -171,3 +192,87 @@ def test_rig_over_dds_in_lockstep_equals_offline(client, driveline_node):
     node_subs = [t for t, _ in client.node.get_subscriber_names_and_types_by_node("clutch_sim", NS)]
     assert f"{NS}/torque_a" in node_subs and f"{NS}/slip_speed" not in node_subs
     assert client.node.count_subscribers(f"{NS}/slip_speed") == 1       # the rig's own
+
+
+def _set(client, name: str, value):
+    """Set one parameter of the node over its parameter service -> SetParametersResult."""
+    from rclpy.parameter import Parameter
+    from rclpy.parameter_client import AsyncParameterClient
+
+    pc = AsyncParameterClient(client.node, f"{NS}/clutch_sim")
+    assert client.spin_until(lambda: pc.services_are_ready(), 30.0)
+    future = pc.set_parameters([Parameter(name, value=value)])
+    assert client.spin_until(future.done, 30.0)
+    (result,) = future.result().results
+    return result
+
+
+def _reset(client) -> None:
+    from std_srvs.srv import Trigger
+
+    cli = client.node.create_client(Trigger, f"{NS}/clutch_sim/reset")
+    assert client.spin_until(cli.service_is_ready, 30.0)
+    future = cli.call_async(Trigger.Request())
+    assert client.spin_until(future.done, 30.0) and future.result().success
+    client.node.destroy_client(cli)
+
+
+def test_runtime_driveline_and_slip_source_changes(client, driveline_node, rig):
+    """Bad values are refused with a reason; new inertias and initial speeds apply (from ~/reset:
+    the run then equals offline with the new driveline); slip_source topic restarts the plant
+    with slip_speed subscribed, driveline again unsubscribes it."""
+    fqn = f"{NS}/clutch_sim"
+    bad = _set(client, "driveline.inertia_a_kgm2", 0.0)
+    assert not bad.successful and "inertia_a_kgm2" in bad.reason and "range" in bad.reason   # descriptor range
+    bad = _set(client, "slip_source", "wheel")
+    assert not bad.successful and "one of topic, driveline" in bad.reason
+    for name, value in (("driveline.inertia_a_kgm2", 1.0), ("driveline.initial_speed_a_rad_s", 20.0),
+                        ("driveline.initial_speed_b_rad_s", 5.0)):
+        assert _set(client, name, value).successful
+    _reset(client)
+    k0 = 10_000                                   # /clock keeps going forward
+    phases = ((0.6, 6000.0, 0.0, 0.0), (0.2, 6000.0, 300.0, -50.0))
+    run = _lockstep(client, rig, driveline_node, fqn, phases, k0)
+    wa, wb = np.array(rig.out["speed_a"]), np.array(rig.out["speed_b"])
+    assert (wa[0], wb[0]) == (20.0, 5.0)          # the new initial speeds at the restart
+    t = (np.array(run["stamps"]) - run["stamps"][0]) * 1e-9
+    off = simulate_driveline(load_model(), t, run["force"], run["tau_a"], run["tau_b"], SUMP_C,
+                             DrivelineParams(1.0, JB, 0.0, 0.0, 20.0, 5.0))
+    np.testing.assert_allclose(wa, off.speed_a_rad_s, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(wb, off.speed_b_rad_s, rtol=1e-9, atol=1e-9)
+    assert off.locked[-1] and run["states"][-1].locked
+    assert run["states"][-1].clutch_torque == pytest.approx((JB * 300.0 + 1.0 * 50.0) / (1.0 + JB), rel=1e-12)
+
+    def node_subscribes_slip(want: bool):
+        def check():
+            try:
+                topics = {t for t, _ in client.node.get_subscriber_names_and_types_by_node("clutch_sim", NS)}
+            except Exception:
+                return False
+            return (f"{NS}/slip_speed" in topics) == want and (f"{NS}/torque_a" in topics) != want
+        return check
+
+    assert _set(client, "slip_source", "topic").successful
+    k1 = k0 + len(t) + 10
+
+    def tick(k):
+        def step():   # the switch happens at a tick; a repeated /clock time is an idempotent redo
+            rig.io.send(force=2000.0, slip=7.5, sump=SUMP_C)
+            rig.io.clock(T0 + k * DT_NS)
+        return step
+
+    assert client.spin_until(node_subscribes_slip(True), 60.0, step=tick(k1), step_period=0.2), driveline_node.log()
+    t_j = T0 + (k1 + 1) * DT_NS
+    rig.io.states.clear()
+    got = []
+
+    def answered():   # open loop again: clutch_state carries the slip_speed input
+        got.extend(m for m in rig.io.states if stamp_ns(m.header.stamp) == t_j and m.slip_speed == 7.5)
+        rig.io.states.clear()
+        return bool(got)
+
+    assert client.spin_until(answered, 60.0, step=tick(k1 + 1), step_period=0.2), driveline_node.log()
+    assert got[-1].applied_force == 2000.0 and not got[-1].locked
+    assert _set(client, "slip_source", "driveline").successful
+    assert client.spin_until(node_subscribes_slip(False), 60.0, step=tick(k1 + 2), step_period=0.2), \
+        driveline_node.log()
