@@ -11,6 +11,10 @@ Topics (relative names, so a namespace or remap places them; see docs/node.md):
        clutch_state (clutch_msgs/ClutchState, stamped, SI), /diagnostics (2 Hz)
   srv  ~/reset (std_srvs/Trigger)
   sim time only: /clock (rosgraph_msgs/Clock) drives the steps.
+  slip_source driveline (closed loop, clutch_sim_ros.driveline_io): slip_speed is not
+       subscribed; in torque_a, torque_b (std_msgs/Float64, N m); out slip_speed, speed_a,
+       speed_b (std_msgs/Float64, rad/s); clutch_torque = transmitted torque (the lock torque
+       while locked). The plant starts once applied_force and sump_temperature have arrived.
 
 QoS.
 - Inputs: sensor-data QoS, latest value only (best effort, keep last 1, volatile). They are
@@ -120,6 +124,9 @@ TOPICS_HELP = """topics (relative: a namespace or remap places them):
   out  /diagnostics      diagnostic_msgs/msg/DiagnosticArray  (2 Hz: inputs, timing, plant)
   srv  ~/reset           std_srvs/srv/Trigger          restart the plant state
   in   /clock            rosgraph_msgs/msg/Clock       (use_sim_time:=true) one step per message
+with slip_source:=driveline (closed loop: slip_speed is an output, not subscribed):
+  in   torque_a, torque_b        std_msgs/msg/Float64  external torques on sides a, b, N m
+  out  slip_speed, speed_a, speed_b  std_msgs/msg/Float64  w_a - w_b, w_a, w_b, rad/s
 QoS: inputs best effort keep-last 1; outputs reliable keep-last 1000; /clock best effort."""
 
 NODE_NAME = "clutch_sim"
