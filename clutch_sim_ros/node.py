@@ -11,6 +11,10 @@ Topics (relative names, so a namespace or remap places them; see docs/node.md):
        clutch_state (clutch_msgs/ClutchState, stamped, SI), /diagnostics (2 Hz)
   srv  ~/reset (std_srvs/Trigger)
   sim time only: /clock (rosgraph_msgs/Clock) drives the steps.
+  slip_source driveline (closed loop, clutch_sim_ros.driveline_io): slip_speed is not
+       subscribed; in torque_a, torque_b (std_msgs/Float64, N m); out slip_speed, speed_a,
+       speed_b (std_msgs/Float64, rad/s); clutch_torque = transmitted torque (the lock torque
+       while locked). The plant starts once applied_force and sump_temperature have arrived.
 
 QoS.
 - Inputs: sensor-data QoS, latest value only (best effort, keep last 1, volatile). They are
@@ -104,6 +108,7 @@ from clutch_model.plant import kernels as K
 from clutch_model.plant.inputs import INPUT_TOPICS, InputChannel
 
 from clutch_sim_ros import diagnostics as D
+from clutch_sim_ros import driveline_io as DIO
 from clutch_sim_ros import params as P
 
 
@@ -119,6 +124,9 @@ TOPICS_HELP = """topics (relative: a namespace or remap places them):
   out  /diagnostics      diagnostic_msgs/msg/DiagnosticArray  (2 Hz: inputs, timing, plant)
   srv  ~/reset           std_srvs/srv/Trigger          restart the plant state
   in   /clock            rosgraph_msgs/msg/Clock       (use_sim_time:=true) one step per message
+with slip_source:=driveline (closed loop: slip_speed is an output, not subscribed):
+  in   torque_a, torque_b        std_msgs/msg/Float64  external torques on sides a, b, N m
+  out  slip_speed, speed_a, speed_b  std_msgs/msg/Float64  w_a - w_b, w_a, w_b, rad/s
 QoS: inputs best effort keep-last 1; outputs reliable keep-last 1000; /clock best effort."""
 
 NODE_NAME = "clutch_sim"
@@ -199,8 +207,12 @@ class ClutchSimNode(Node):
         self._step_group = MutuallyExclusiveCallbackGroup()
         self.create_subscription(Float64, "applied_force", self._on_force, INPUT_QOS,
                                  callback_group=self._step_group)
-        self.create_subscription(Float64, "slip_speed", self._on_slip, INPUT_QOS,
-                                 callback_group=self._step_group)
+        self._slip_sub = None          # slip_source topic: the slip_speed input
+        self._dl: Optional[DIO.DrivelineSource] = None      # slip_source driveline: plant + torques
+        self._dl_topics: Optional[DIO.DrivelineTopics] = None
+        self._pending_source: Optional[str] = None          # slip_source change, applied by a tick
+        self._pending_driveline = False                     # driveline.* change, applied by a tick
+        self._set_slip_source(self.params.slip_source)
         self.create_subscription(Temperature, "sump_temperature", self._on_sump, INPUT_QOS,
                                  callback_group=self._step_group)
         self._pub_torque = self.create_publisher(Float64, "clutch_torque", OUTPUT_QOS)
@@ -221,10 +233,57 @@ class ClutchSimNode(Node):
         self.get_logger().info(
             f"clutch model {model.source}; {self._mode_text()}, "
             f"publish every {self.params.publish_every}, input timeout {self.params.input_timeout_s:g} s; "
-            f"waiting for {', '.join(self.inputs)}")
+            f"waiting for {', '.join(ch.name for ch in self._required_inputs())}")
 
     def _mode_text(self) -> str:
         return "sim time: one step per /clock" if self._sim else f"{self.params.rate_hz:g} Hz"
+
+    # ---- slip source (topic: open loop; driveline: closed loop) ---------------------
+    def _set_slip_source(self, source: str) -> None:
+        """Create the slip_speed input (topic) or the driveline plant, its torque inputs and
+        slip/speed outputs (driveline); the plant restarts at the next tick."""
+        if source == "driveline":
+            if self._slip_sub is not None:
+                self.destroy_subscription(self._slip_sub)
+                self._slip_sub = None
+            if self._dl is None:
+                self._dl = DIO.DrivelineSource(self.model, self.params.driveline())
+                self._dl_topics = DIO.DrivelineTopics(self, self._dl, INPUT_QOS, OUTPUT_QOS,
+                                                      callback_group=self._step_group)
+            self.inputs = {ch.name: ch for ch in (self._force, self._sump, *self._dl.torques.channels)}
+        else:
+            if self._dl_topics is not None:
+                self._dl_topics.destroy(self)
+            self._dl = self._dl_topics = None
+            if self._slip_sub is None:
+                self._slip_sub = self.create_subscription(Float64, "slip_speed", self._on_slip, INPUT_QOS,
+                                                          callback_group=self._step_group)
+            self.inputs = {ch.name: ch for ch in (self._force, self._slip, self._sump)}
+        self._snapshot = np.zeros_like(self._plant_state())
+        self._running = False
+        self._rejected_reported = {}
+
+    def _required_inputs(self) -> tuple:
+        """The inputs that must have arrived before the plant starts."""
+        if self._dl is not None:
+            return self._force, self._sump
+        return self._force, self._slip, self._sump
+
+    def _plant_state(self) -> np.ndarray:
+        return self._dl.state if self._dl is not None else self._plant.state
+
+    def _sample(self, inputs, now_ns: int):
+        """Sample the plant with this tick's inputs -> (record, inputs for clutch_state)."""
+        if self._dl is None:
+            return self._plant.sample(*inputs), inputs
+        record = self._dl.sample(inputs[0], inputs[2], now_ns, self.params.input_timeout_s)
+        return record, self._dl.state_inputs(inputs[0], inputs[2], record)
+
+    def _apply_pending_source(self) -> None:
+        source, self._pending_source = self._pending_source, None
+        if source != ("driveline" if self._dl is not None else "topic"):
+            self._set_slip_source(source)
+            self.get_logger().info(f"slip_source changed: now {source}; plant restarts")
 
     # ---- stepping mode -------------------------------------------------------------
     def _set_mode(self, sim: bool) -> None:
@@ -282,6 +341,10 @@ class ClutchSimNode(Node):
                     self._pending_model = (base.with_lock_slip(self.params.lock_slip_rad_s), restart)
                 elif p.name == "use_sim_time":
                     self._set_mode(bool(p.value))
+                elif p.name == "slip_source":
+                    self._pending_source = p.value        # the next tick switches (step group)
+                elif p.name.startswith("driveline."):
+                    self._pending_driveline = True
                 self.get_logger().info(f"parameter {p.name} = {p.value!r} applied")
         except Exception as exc:
             self._callback_error(exc)
@@ -294,6 +357,8 @@ class ClutchSimNode(Node):
         self._plant = Plant(model)
         self.model = model
         self.max_pack_force_n = float(model.max_pack_force_n)
+        if self._dl is not None:
+            self._dl.set_model(model)            # state kept (restarted below if asked)
         if restart:
             self._start(inputs)
         else:
@@ -314,7 +379,11 @@ class ClutchSimNode(Node):
     # ---- stepping ------------------------------------------------------------------
     def _held_inputs(self, now_ns: int) -> Optional[tuple[float, float, float]]:
         """The inputs for this tick (None until every input has arrived); stale force -> 0."""
+        if self._pending_source is not None:
+            self._apply_pending_source()
         f, w, s = self._force, self._slip, self._sump
+        if self._dl is not None:
+            return self._held_driveline_inputs(now_ns)
         if self._rebase:
             for ch in (f, w, s):
                 ch.rebase(now_ns)
@@ -328,9 +397,25 @@ class ClutchSimNode(Node):
         force = 0.0 if f.is_stale(now_ns, self.params.input_timeout_s) else f.value
         return force, w.value, s.value
 
+    def _held_driveline_inputs(self, now_ns: int) -> Optional[tuple[float, float, float]]:
+        """Driveline mode: force and sump (slip is the plant's; the torques are taken by the
+        sample); (force, 0.0, sump) once both have arrived."""
+        f, s = self._force, self._sump
+        if self._rebase:
+            for ch in self.inputs.values():
+                ch.rebase(now_ns)
+            self._rebase = False
+        f.on_tick(now_ns)
+        s.on_tick(now_ns)
+        self._now_tick_ns = now_ns
+        if not self._dl.ready(f.value, s.value):
+            return None
+        force = 0.0 if f.is_stale(now_ns, self.params.input_timeout_s) else f.value
+        return force, 0.0, s.value
+
     def _step_to(self, t_ns: int, inputs) -> None:
         """Bring the plant to time t_ns (the tick's time base) with the previous inputs held."""
-        plant = self._plant
+        plant = self._dl if self._dl is not None else self._plant
         if not self._running:
             self._start(inputs)
             self._t_start_ns = t_ns
@@ -360,6 +445,10 @@ class ClutchSimNode(Node):
             self.timing.wall_time_s = (t_ns - self._t_start_ns) * 1e-9
         if self._pending_model is not None:
             self._swap_model(inputs)
+        if self._pending_driveline:
+            self._pending_driveline = False
+            if self._dl is not None:   # new inertias/losses from this step, speeds kept
+                self._dl.set_driveline(self.params.driveline())
 
     def _on_timer(self) -> None:
         """Wall-clock tick: advance by the elapsed time -> sample -> publish."""
@@ -374,9 +463,9 @@ class ClutchSimNode(Node):
             self._step_to(t0, inputs)
             if started or self._t_start_ns == t0:
                 self._stamp_offset_ns = _clock_offset_ns()
-            record = self._plant.sample(*inputs)
+            record, used = self._sample(inputs, t0)
             self.timing.step_ms.add((time.perf_counter_ns() - s0) * 1e-6)
-            self._publish(record, inputs, self._stamp_offset_ns + t0)
+            self._publish(record, used, self._stamp_offset_ns + t0)
         except Exception as exc:  # never raise into the executor
             self._callback_error(exc)
         finally:
@@ -421,9 +510,9 @@ class ClutchSimNode(Node):
             self.counters.ticks += 1
             s0 = time.perf_counter_ns()
             self._step_to(t_ns, inputs)
-            record = self._plant.sample(*inputs)
+            record, used = self._sample(inputs, t_ns)
             self.timing.step_ms.add((time.perf_counter_ns() - s0) * 1e-6)
-            self._publish(record, inputs, t_ns)
+            self._publish(record, used, t_ns)
         except Exception as exc:
             self._callback_error(exc)
         finally:
@@ -431,8 +520,14 @@ class ClutchSimNode(Node):
 
     def _start(self, inputs: tuple[float, float, float]) -> None:
         """(Re)start the plant from the current inputs: initial film, pack at the sump, energy 0."""
-        self._plant.reset(inputs[0], inputs[2])
-        self._snapshot[:] = self._plant.state
+        if self._dl is not None:
+            if self._pending_driveline:   # new initial speeds count at this start
+                self._pending_driveline = False
+                self._dl.set_driveline(self.params.driveline())
+            self._dl.reset(inputs[0], inputs[2])
+        else:
+            self._plant.reset(inputs[0], inputs[2])
+        self._snapshot[:] = self._plant_state()
         self._last_step_reset = True
         self._tick_index = 0
         self.timing.plant_time_s = 0.0
@@ -485,10 +580,12 @@ class ClutchSimNode(Node):
         self._pub_torque.publish(torque_msg)
         self._pub_temp.publish(temp_msg)
         self._pub_state.publish(st)
+        if self._dl_topics is not None:
+            self._dl_topics.publish(record)
         c.published += 1
         if not self._sim:   # receive (middleware) -> published, system clock
             done = time.time_ns()
-            for ch in (self._force, self._slip, self._sump):
+            for ch in self.inputs.values():
                 if ch.unused:
                     ch.unused = False
                     if ch.rx_ns:
@@ -499,7 +596,7 @@ class ClutchSimNode(Node):
     def _on_reset(self, request, response):
         try:
             self.counters.resets += 1
-            if self._force.value is None or self._slip.value is None or self._sump.value is None:
+            if any(ch.value is None for ch in self._required_inputs()):
                 response.success = True
                 response.message = "plant not started yet (waiting for inputs); nothing to reset"
                 return response

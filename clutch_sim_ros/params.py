@@ -16,6 +16,8 @@ import math
 from dataclasses import dataclass, fields, replace
 from typing import Optional
 
+from clutch_sim_ros import driveline_io as DIO
+
 
 @dataclass(frozen=True)
 class Spec:
@@ -53,7 +55,7 @@ SPEC: tuple[Spec, ...] = (
          "step once per /clock message (lock-step, plant time = /clock time) instead of the "
          "wall-clock timer",
          "switches the stepping (timer <-> /clock); the plant state is kept"),
-)
+) + tuple(Spec(*row) for row in DIO.PARAMETERS)   # slip_source, driveline.* (driveline mode)
 SPEC_BY_NAME = {s.name: s for s in SPEC}
 DECLARED = tuple(s.name for s in SPEC if s.name != "use_sim_time")   # use_sim_time: rclpy's
 
@@ -67,16 +69,36 @@ class NodeParams:
     lock_slip_rad_s: float = 0.001
     frame_id: str = "clutch"
     use_sim_time: bool = False
+    slip_source: str = "topic"
+    driveline_inertia_a_kgm2: float = DIO.DEFAULTS["driveline.inertia_a_kgm2"]
+    driveline_inertia_b_kgm2: float = DIO.DEFAULTS["driveline.inertia_b_kgm2"]
+    driveline_damping_a_nms: float = DIO.DEFAULTS["driveline.damping_a_nms"]
+    driveline_damping_b_nms: float = DIO.DEFAULTS["driveline.damping_b_nms"]
+    driveline_initial_speed_a_rad_s: float = DIO.DEFAULTS["driveline.initial_speed_a_rad_s"]
+    driveline_initial_speed_b_rad_s: float = DIO.DEFAULTS["driveline.initial_speed_b_rad_s"]
 
     @property
     def period_s(self) -> float:
         return 1.0 / self.rate_hz
 
+    def value(self, name: str):
+        """The value of parameter ``name`` (ROS name, e.g. driveline.inertia_a_kgm2)."""
+        return getattr(self, field_name(name))
+
+    def driveline(self):
+        """clutch_model.DrivelineParams of the driveline.* parameters."""
+        return DIO.driveline_params({n: self.value(n) for n in DIO.PARAMETER_NAMES[1:]})
+
     def with_value(self, name: str, value) -> "NodeParams":
-        return replace(self, **{name: SPEC_BY_NAME[name].kind(value)})
+        return replace(self, **{field_name(name): SPEC_BY_NAME[name].kind(value)})
 
 
-assert [f.name for f in fields(NodeParams)] == [s.name for s in SPEC]
+def field_name(name: str) -> str:
+    """NodeParams field of a parameter: the ROS name with '.' as '_'."""
+    return name.replace(".", "_")
+
+
+assert [f.name for f in fields(NodeParams)] == [field_name(s.name) for s in SPEC]
 
 
 def check_change(name: str, value) -> Optional[str]:
@@ -96,13 +118,13 @@ def check_change(name: str, value) -> Optional[str]:
         lo, hi = spec.range
         if not (isinstance(value, (int, float)) and math.isfinite(value) and lo <= value <= hi):
             return f"{name} must be in [{lo:g}, {hi:g}], got {value!r}"
-    return None
+    return DIO.check_value(name, value)     # slip_source: one of its choices
 
 
 def check(params: NodeParams) -> None:
     """Raise ValueError for an invalid value."""
     for spec in SPEC:
-        reason = check_change(spec.name, getattr(params, spec.name))
+        reason = check_change(spec.name, params.value(spec.name))
         if reason:
             raise ValueError(f"parameter {reason}")
 
@@ -124,6 +146,9 @@ def descriptor(spec: Spec):
         return ParameterDescriptor(description=text, type=ParameterType.PARAMETER_INTEGER,
                                    integer_range=[IntegerRange(from_value=spec.range[0],
                                                                to_value=spec.range[1], step=1)])
+    if spec.name == "slip_source":
+        return ParameterDescriptor(description=text, type=ParameterType.PARAMETER_STRING,
+                                   additional_constraints="one of: " + ", ".join(DIO.SLIP_SOURCES))
     return ParameterDescriptor(description=text, type=ParameterType.PARAMETER_STRING)
 
 
@@ -169,7 +194,7 @@ def declare(node) -> NodeParams:
             raise ValueError(f"parameters: {result.reason}")
     values = {n: node.get_parameter(n).value for n in DECLARED}
     values["use_sim_time"] = bool(node.get_parameter("use_sim_time").value)
-    params = NodeParams(**{n: SPEC_BY_NAME[n].kind(v) for n, v in values.items()})
+    params = NodeParams(**{field_name(n): SPEC_BY_NAME[n].kind(v) for n, v in values.items()})
     check(params)
     return params
 

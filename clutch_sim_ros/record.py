@@ -29,6 +29,7 @@ from clutch_model.errors import DataError
 from clutch_model.formats.bag_messages import normalize_namespace
 
 RECORD_QOS_DEPTH = 1000
+READY_LINE = "record: ready"   # printed (stderr) once every output of the node is matched
 EARLY_LIMIT = 100_000     # messages held until the first valid log time (sim time: the first /clock)
 
 
@@ -243,7 +244,9 @@ def record(out, namespace: str = "/clutch", duration_s: Optional[float] = None, 
     the stamped output of its step, /diagnostics at the /clock time (held until the first
     /clock arrives; never logged at 0). On SIGINT/SIGTERM the
     messages already delivered are still taken and written (up to 2 s), then the bag is
-    closed: it is complete. Returns {"out", "counts": {topic: messages}, "skipped",
+    closed: it is complete. Once a publisher of every output of the node is matched, the line
+    ``record: ready: <topics> matched`` goes to stderr (a script starting the data after it loses
+    nothing). Returns {"out", "counts": {topic: messages}, "skipped",
     "interrupted"}."""
     import time
 
@@ -272,12 +275,17 @@ def record(out, namespace: str = "/clutch", duration_s: Optional[float] = None, 
         executor.add_node(node)
         start = time.monotonic()
         last_print = start
+        announced = False
         try:
             while context.ok() and not stop:
                 now = time.monotonic()
                 if duration_s is not None and now - start >= duration_s:
                     break
                 executor.spin_once(timeout_sec=0.1)
+                if not announced and recorder.matched():   # the event a driver can wait for
+                    announced = True
+                    print(f"{READY_LINE}: {', '.join(t for t, _ in output_topics(namespace)[:-1])} matched",
+                          file=sys.stderr, flush=True)
                 if progress and now - last_print >= 2.0:
                     last_print = now
                     print(f"\rrecording {out}: {recorder.total} messages, {now - start:.0f} s", end="",

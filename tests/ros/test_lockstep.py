@@ -168,8 +168,11 @@ def test_record_process_records_play_clock_losslessly(client, domain_id, tmp_pat
     drives a sim-time node: every step's clutch_state is in the bag (none lost), nothing is
     logged before the data starts (no 1970 log times), and Ctrl-C leaves a complete bag."""
     import signal
+    import threading
 
     from rosbags.highlevel import AnyReader
+
+    from clutch_sim_ros.record import READY_LINE
 
     from clutch_model.formats.bag_messages import read_run, row_times_ns
 
@@ -181,17 +184,35 @@ def test_record_process_records_play_clock_losslessly(client, domain_id, tmp_pat
     rec = subprocess.Popen([sys.executable, "-m", "clutch_sim.cli", "record", "--out", str(out), "--namespace", "/rigR",
                             "--use-sim-time"], env=env, cwd=str(REPO), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                            text=True)
+    err_lines: list = []      # the recorder's stderr, read as it comes (its ready line is the event)
+
+    def read_stderr():
+        for line in iter(rec.stderr.readline, ""):
+            err_lines.append(line)
+
+    reader = threading.Thread(target=read_stderr, daemon=True)
+    reader.start()
+    data_topics = [f"/rigR/{name}" for name in ("clutch_torque", "pack_temperature", "clutch_state")]
+
+    def recorder_ready():
+        # the recorder's own subscriptions matched the node's publishers (its ready line), and
+        # the recorder's subscriptions on every output are in the graph (what the node's
+        # publishers discover, too)
+        return (any(READY_LINE in line for line in err_lines)
+                and all(client.node.count_subscribers(t) >= 1 and client.node.count_publishers(t) >= 1
+                        for t in data_topics))
+
     try:
-        assert client.spin_until(lambda: client.node.count_subscribers("/rigR/clutch_state") >= 1
-                                 and client.node.count_publishers("/rigR/clutch_state") >= 1, 60.0)
-        client.spin_for(2.0)                 # the node's publishers match the recorder too
+        assert client.spin_until(recorder_ready, 120.0), "".join(err_lines) + node.log()
         play = subprocess.run([sys.executable, "-m", "clutch_sim.cli", "play", "--bag", str(bag), "--clock",
                                "--namespace", "/rigR"], env=env, cwd=str(REPO), capture_output=True, text=True,
                               timeout=300)
         assert play.returncode == 0, play.stderr + node.log()
         client.spin_for(1.0)
         rec.send_signal(signal.SIGINT)
-        _, rec_err = rec.communicate(timeout=60)
+        rec.wait(timeout=60)
+        reader.join(timeout=10)
+        rec_err = "".join(err_lines)
     finally:
         if rec.poll() is None:
             rec.kill()

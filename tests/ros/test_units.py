@@ -46,7 +46,13 @@ def test_parameter_defaults_and_ranges():
 
     assert {s.name: s.default for s in SPEC} == {
         "rate_hz": 1000.0, "publish_every": 1, "clutch_params_file": "", "input_timeout_s": 0.1,
-        "lock_slip_rad_s": 0.001, "frame_id": "clutch", "use_sim_time": False}
+        "lock_slip_rad_s": 0.001, "frame_id": "clutch", "use_sim_time": False, "slip_source": "topic",
+        "driveline.inertia_a_kgm2": 0.5, "driveline.inertia_b_kgm2": 1.2, "driveline.damping_a_nms": 0.05,
+        "driveline.damping_b_nms": 0.05, "driveline.initial_speed_a_rad_s": 0.0,
+        "driveline.initial_speed_b_rad_s": 0.0}
+    assert "one of topic, driveline" in check_change("slip_source", "wheel")
+    assert "[1e-06, 1e+06]" in check_change("driveline.inertia_b_kgm2", 0.0)
+    assert NodeParams().with_value("driveline.inertia_a_kgm2", 2).driveline().inertia_a_kgm2 == 2.0
     check(NodeParams())
     for bad in (dict(rate_hz=0.0), dict(rate_hz=math.nan), dict(publish_every=0),
                 dict(input_timeout_s=-1.0), dict(lock_slip_rad_s=-0.1)):
