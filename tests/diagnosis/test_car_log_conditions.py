@@ -42,7 +42,7 @@ FAST = [
     ("few_long", "transport_delay", 36),             # few long runs
     ("lab", "spring_preload+torque_offset", 37),     # two causes at once
     ("unaligned", "torque_sensor_lowpass", 38),      # lookalike of actuator_lag: torque_sensor_lag
-    ("lab", "slip_power_fade", 39),                  # lookalike of friction_degradation: unexplained
+    ("lab", "slip_power_fade", 39),                  # lookalike of friction_degradation: discovered (or unexplained)
 ]
 SLOW = [
     ("held", "none", 41),
@@ -81,6 +81,15 @@ def _check(tmp_path, condition, case, seed):
             got = next(c for c in causes if c["id"] == mech["id"])
             (name,) = [k for k in mech if k != "id"]
             assert got["parameters"][name] == pytest.approx(mech[name], rel=0.3), what
+    elif res.verdict == "discovered":
+        # a term beyond the catalog: its gain holds on the unseen bags against the true torque,
+        # and for slip-power fade mu_f / (1 + k P_slip) (low-passed) the slip-power terms sum to -k
+        assert ext < cal, f"{what}; unseen bags: calibrated {cal:.2f}, extended {ext:.2f} N*m"
+        terms = res.report["cause"]["parameters"]
+        for effect in camp.spec.effects:
+            if effect["name"] == "slip_power_fade":
+                fade = sum(v for k, v in terms.items() if k.startswith("mu:slip_power"))
+                assert fade == pytest.approx(-effect["k_per_kw"], rel=0.3), what
     else:
         # none / unexplained: the extended model is the calibrated one
         assert ext == pytest.approx(cal, rel=1e-9), what
