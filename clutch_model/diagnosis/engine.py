@@ -48,6 +48,10 @@ ALPHA = 1e-3
 # verdicts of the catalog selection after which terms beyond the catalog are searched
 # (clutch_model.discovery); a discovered extension is judged by the same selection
 DISCOVER_AFTER = ("unexplained", "none")
+# topics on their own clocks: rows at the measured torque's own stamps only (a 1 Hz fill grid
+# leaves no row between stamps 50 Hz apart), so the residual is a contiguous series the AR noise
+# model of the held-out tests can be fitted to (interleaved NaN rows would break every history)
+MEASURED_TIME_GRID_HZ = 1.0
 
 
 def diagnosis_candidate_ids() -> list:
@@ -242,7 +246,7 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
     if measured_time:
         # compare where the measurement is: rows at the torque's own stamps, inputs
         # interpolated between their samples (diagnosis.measured_time)
-        campaign = measured_time_campaign(campaign)
+        campaign = measured_time_campaign(campaign, rate_hz=MEASURED_TIME_GRID_HZ)
     campaign = smooth_sump(campaign)
     # lock-up phases (found from the slip data, diagnosis.lockup): the driveline sets the torque
     campaign, locked = without_locked_rows(campaign)
