@@ -45,6 +45,13 @@ from clutch_model.diagnosis.structure_test import input_features
 NAMED_GAIN_FRAC = 0.005
 STRUCTURE_GAIN_FRAC = 0.01
 ALPHA = 1e-3
+# verdicts of the catalog selection after which terms beyond the catalog are searched
+# (clutch_model.discovery); a discovered extension is judged by the same selection
+DISCOVER_AFTER = ("unexplained", "none")
+# topics on their own clocks: rows at the measured torque's own stamps only (a 1 Hz fill grid
+# leaves no row between stamps 50 Hz apart), so the residual is a contiguous series the AR noise
+# model of the held-out tests can be fitted to (interleaved NaN rows would break every history)
+MEASURED_TIME_GRID_HZ = 1.0
 
 
 def diagnosis_candidate_ids() -> list:
@@ -154,6 +161,7 @@ class Diagnosis:
     bench_info: dict = field(default_factory=dict)
     calibration_info: dict = field(default_factory=dict)
     timings: dict = field(default_factory=dict)
+    discovery: "DiscoveryOutcome | None" = None
 
     @property
     def gain_pct(self) -> float:
@@ -215,7 +223,7 @@ def ripple_columns(campaign: Campaign, torque: np.ndarray):
 
 def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held_out=None,
                       candidates=None, calibrate=None, progress=None, bench_info=None,
-                      checkpoint=None, measured_time=None) -> Diagnosis:
+                      checkpoint=None, measured_time=None, discover=True) -> Diagnosis:
     """Diagnose a campaign given the bench-fitted model. ``measured_time`` (default: when the
     torque and force topics are not aligned) compares model and measurement at the measured
     torque's own stamps (``measured_time_campaign``) instead of the replay grid.
@@ -223,7 +231,9 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
     add a car-data calibration (regression + Monte Carlo) before the shared friction
     correction; it returns (model, info). ``held_out``: report labels ("bag" or
     "bag[t0:t1]") to hold out instead of the automatic split. ``checkpoint(stage, **outputs)``
-    is called as each stage completes ("split", "calibrated", "selected")."""
+    is called as each stage completes ("split", "calibrated", "selected"). ``discover``: when the
+    catalog leaves structure (unexplained), search terms beyond the catalog
+    (clutch_model.discovery) and name ``discovered`` when they pass the same held-out rules."""
     tick = time.perf_counter()
     timings = {}
     say = progress or (lambda msg: None)
@@ -236,7 +246,7 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
     if measured_time:
         # compare where the measurement is: rows at the torque's own stamps, inputs
         # interpolated between their samples (diagnosis.measured_time)
-        campaign = measured_time_campaign(campaign)
+        campaign = measured_time_campaign(campaign, rate_hz=MEASURED_TIME_GRID_HZ)
     campaign = smooth_sump(campaign)
     # lock-up phases (found from the slip data, diagnosis.lockup): the driveline sets the torque
     campaign, locked = without_locked_rows(campaign)
@@ -315,12 +325,36 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
     feats = F.feature_signals(campaign, sim_cal)
     r2 = F.explained_variance(np.where(scored, calibrated.residual, np.nan), feats, campaign.run_index)
 
+    # -- stage 3b: beyond the catalog (discovery), judged by the same held-out selection -------
+    discovery = None
+    if discover and sel.verdict in DISCOVER_AFTER:
+        t0 = time.perf_counter()
+        discovery = _discover(data, base, campaign, bench_model, say)
+        timings["discovery"] = time.perf_counter() - t0
+
     # -- stage 4: extend ------------------------------------------------------------------------
     cause = {"named": None, "none": "none", "unexplained": "unexplained"}[sel.verdict]
     extended_fit = None
     extended_model = calibrated.model
     cause_params, cause_ci, causes = {}, {}, []
-    if sel.verdict == "named":
+    if discovery is not None and discovery.accepted:
+        cause = "discovered"
+        found = discovery.cause
+        extended_model = found.fitted.model
+        predicted = np.asarray(found.fitted.predict(data), float)
+        extended_fit = _DiscoveredExtension(extended_model, campaign.torque_measured - predicted, predicted)
+        if any("energy" in tid for tid in found.parameters):
+            from clutch_model.discovery.identify import _record_energy_history as record_discovered_energy
+
+            record_discovered_energy(extended_model, campaign)
+        causes.append({"id": "discovered", "parameters": dict(found.parameters),
+                       "parameters_ci95": dict(found.fitted.parameters_ci95),
+                       "readings": list(found.fitted.readings),
+                       "held_out_t": found.comparison.t_stat, "held_out_p": found.comparison.p_value,
+                       "innovation_variance_cut": found.comparison.gain_frac})
+        cause_params = dict(causes[0]["parameters"])
+        cause_ci = dict(causes[0]["parameters_ci95"])
+    elif sel.verdict == "named":
         cause = sel.causes[0].id
         extended_fit = sel.final.fit
         extended_model = extended_fit.model
@@ -345,12 +379,14 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
         cause_params = {"residual_follows": {k: round(v, 3) for k, v in top},
                         "closest": list(sel.closest),
                         "closest_leaves": {k: v for k, v in sel.closest_leaves.items() if k != "structure_follows"}}
+        if discovery is not None:
+            cause_params["discovery_tried"] = discovery.tried()
     final_resid = extended_fit.residual if extended_fit else calibrated.residual
     nm = fit_noise_model(np.where(fit_mask & scored, final_resid, np.nan), campaign.run_start)
     noise = {"ar_order": nm.order, "innovation_sigma_nm": nm.innovation_sigma,
              "sigma_nm": math.sqrt(nm.variance),
              "ar_coefficients": [float(v) for v in -nm.a[1:6]]}
-    evidence = _evidence(cause, sel, rmse, r2, causes, noise)
+    evidence = _evidence(cause, sel, rmse, r2, causes, noise, discovery)
     timings["total"] = time.perf_counter() - tick
     d = Diagnosis(cause_id=cause, reason=sel.reason, evidence=evidence, cause_parameters=cause_params,
                   sigma_nm=noise["sigma_nm"], rmse=rmse, held_out=split.labels, fit_runs=fit_runs,
@@ -359,9 +395,66 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
                   calibrated_fit=calibrated, calibrated_sim=sim_cal, extended_fit=extended_fit,
                   nominal_pred=nominal_rep.torque_sim, causes=causes, cause_ci95=cause_ci, selection=sel,
                   split=split, fit_mask=fit_mask, eval_mask=eval_mask, locked_rows=int(locked.sum()),
-                  noise=noise, bench_info=bench_info or {}, calibration_info=calibration_info, timings=timings)
+                  noise=noise, bench_info=bench_info or {}, calibration_info=calibration_info, timings=timings,
+                  discovery=discovery)
     emit("selected", diagnosis=d)
     return d
+
+
+@dataclass
+class _DiscoveredExtension:
+    """What stage 4 needs of an extended fit (model, residual on every row)."""
+
+    model: ClutchModel
+    residual: np.ndarray
+    predicted: np.ndarray
+
+
+@dataclass
+class DiscoveryOutcome:
+    """Discovery as judged by the selection: ``accepted`` when the discovered extension was
+    named (predicts the held-out residual better than the noise model, materially, with a
+    lower plain held-out RMSE) and what remains after it is noise."""
+
+    selection: Selection
+    accepted: bool
+
+    @property
+    def cause(self):
+        return self.selection.causes[0] if self.selection.causes else None
+
+    def tried(self) -> list:
+        out = []
+        for st in self.selection.steps:
+            for sc in st.scores:
+                f = sc.fitted
+                out.append({"id": sc.id, "terms": dict(f.parameters), "parameters_ci95": dict(f.parameters_ci95),
+                            "readings": list(getattr(f, "readings", [])),
+                            "held_out_t": sc.comparison.t_stat, "held_out_p": sc.comparison.p_value,
+                            "innovation_variance_cut": sc.comparison.gain_frac,
+                            "named": st.chosen == sc.id,
+                            "dropped": [str(d) for d in getattr(f, "dropped", [])][:10]})
+        rem = self.selection.remainder_structure
+        if rem is not None and out and out[-1]["named"]:
+            out[-1]["structure_left_t"] = rem.comparison.t_stat
+            out[-1]["structure_left"] = bool(rem.structured)
+        return out
+
+
+def _discover(data: SelectionData, base, campaign: Campaign, bench_model: ClutchModel, say) -> DiscoveryOutcome:
+    """Terms beyond the catalog (discovery.DiscoveryCandidate: sparse search + joint refit on
+    the training rows only, friction anchored on the bench fit), judged by the same selection
+    as the catalog: named only when it beats the noise model on held-out rows and nothing
+    predictable remains after it."""
+    from clutch_model.discovery.candidate import DiscoveryCandidate
+
+    say("discovery: searching terms beyond the catalog on the fitted data")
+    cand = DiscoveryCandidate(campaign, bench_model=bench_model, progress=say)
+    dsel = select_causes(data, base, [cand], alpha=ALPHA, min_gain_frac=NAMED_GAIN_FRAC,
+                         structure_min_gain_frac=STRUCTURE_GAIN_FRAC, plain_gain=True, intervals=False,
+                         max_causes=1, refine_top=0, progress=say)
+    accepted = dsel.verdict == "named" and bool(dsel.causes and dsel.causes[0].parameters)
+    return DiscoveryOutcome(dsel, accepted)
 
 
 def _record_energy_history(model: ClutchModel, campaign: Campaign) -> None:
@@ -376,7 +469,7 @@ def _record_energy_history(model: ClutchModel, campaign: Campaign) -> None:
     model.mechanism("friction_degradation").values["energy_history"] = history
 
 
-def _evidence(cause, sel: Selection, rmse, r2, causes, noise) -> str:
+def _evidence(cause, sel: Selection, rmse, r2, causes, noise, discovery=None) -> str:
     top = [(k, v) for k, v in sorted(r2.items(), key=lambda kv: -kv[1])[:3] if v >= 0.05]
     follows = (", ".join(f"{k} (R² {v:.2f})" for k, v in top) if top
                else "none of the candidate features (each explains < 5 % of it)")
@@ -389,8 +482,22 @@ def _evidence(cause, sel: Selection, rmse, r2, causes, noise) -> str:
             f"follows {follows}. Best candidates against the noise model on held-out data: {ranked}.")
     if cause == "none":
         return base + f" Verdict none: {sel.reason}."
+    if cause == "discovered":
+        c = causes[0]
+        return (base + f" No catalog mechanism explains it ({sel.reason}). Discovered beyond the catalog: "
+                + "; ".join(c.get("readings", [])) + f" (held-out t = {c['held_out_t']:.1f}, innovation variance "
+                f"-{100 * c['innovation_variance_cut']:.1f} %); what remains is indistinguishable from noise on "
+                f"held-out data; the extended model's held-out RMSE is {rmse['extended']:.2f} N·m.")
     if cause == "unexplained":
-        return base + f" Verdict unexplained: {sel.reason}."
+        tried = ""
+        if discovery is not None:
+            tr = discovery.tried()
+            if tr and tr[0]["terms"]:
+                tried = (" Discovery beyond the catalog tried " + "; ".join(tr[0]["readings"] or list(tr[0]["terms"]))
+                         + f" (held-out t = {tr[0]['held_out_t']:.1f}): {discovery.selection.reason}.")
+            else:
+                tried = " Discovery beyond the catalog found no term on the fitted data."
+        return base + f" Verdict unexplained: {sel.reason}." + tried
     named = "; ".join(f"{c['id']} (" + ", ".join(
         f"{k} = {v:.4g} [{c['parameters_ci95'].get(k, [math.nan, math.nan])[0]:.4g}, "
         f"{c['parameters_ci95'].get(k, [math.nan, math.nan])[1]:.4g}]" for k, v in c["parameters"].items()) + ")"

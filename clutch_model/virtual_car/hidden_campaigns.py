@@ -261,7 +261,7 @@ def named_causes(report: dict) -> tuple:
     cause = report.get("cause") or {}
     verdict = str(cause.get("id", "error"))
     if "causes" in report and report["causes"] is not None:
-        ids = [str(c.get("id")) for c in report["causes"]]
+        ids = [str(c.get("id")) for c in report["causes"] if str(c.get("id")) not in VERDICTS_WITHOUT_CAUSE]
     else:
         ids = [] if verdict in VERDICTS_WITHOUT_CAUSE else [verdict]
     return verdict, ids
