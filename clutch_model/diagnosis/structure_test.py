@@ -277,18 +277,23 @@ def _cv_groups(rows: np.ndarray, run_start: np.ndarray, n_chunks: int = 5) -> np
     return np.arange(rows.size) * n_chunks // max(rows.size, 1)
 
 
+def _standardised(residual, X, train_mask):
+    """(residual, X, training rows usable, X scaled to unit RMS on them, the scale)."""
+    r = np.asarray(residual, float)
+    X = np.asarray(X, float)
+    ok = train_mask & np.isfinite(r) & np.all(np.isfinite(X), axis=1)
+    scale = np.sqrt(np.mean(X[ok] ** 2, axis=0))
+    scale = np.where(scale > 0, scale, 1.0)
+    return r, X, ok, X / scale, scale
+
+
 def fit_flexible(residual: np.ndarray, X: np.ndarray, train_mask: np.ndarray, run_start: np.ndarray,
                  iterations: int = 2, max_order: int = DEFAULT_MAX_ORDER, ridge: bool = True):
     """Ridge regression of the residual on the feature columns X, by feasible GLS: the AR noise
     model of what is left is refitted and the regression redone on whitened data
     (Cochrane-Orcutt), so coloured noise does not pass for a slow input. -> (beta on the
     original columns, prediction on all rows, noise model of the remainder)."""
-    r = np.asarray(residual, float)
-    X = np.asarray(X, float)
-    ok = train_mask & np.isfinite(r) & np.all(np.isfinite(X), axis=1)
-    scale = np.sqrt(np.mean(X[ok] ** 2, axis=0))
-    scale = np.where(scale > 0, scale, 1.0)
-    Xs = X / scale
+    r, X, ok, Xs, scale = _standardised(residual, X, train_mask)
     segs = segments_of(np.where(ok, r, np.nan), run_start)
     rows = np.concatenate([np.arange(a, b) for a, b in segs]) if segs else np.zeros(0, int)
     beta = np.zeros(X.shape[1])
@@ -313,12 +318,7 @@ def fit_flexible_ols(residual: np.ndarray, X: np.ndarray, train_mask: np.ndarray
     with it learns only the structure's fast edges (and extrapolates its level wildly); the
     held-out test, with its own whitening, keeps coloured noise from passing for structure.
     -> (beta on the original columns, prediction on all rows)."""
-    r = np.asarray(residual, float)
-    X = np.asarray(X, float)
-    ok = train_mask & np.isfinite(r) & np.all(np.isfinite(X), axis=1)
-    scale = np.sqrt(np.mean(X[ok] ** 2, axis=0))
-    scale = np.where(scale > 0, scale, 1.0)
-    Xs = X / scale
+    r, X, ok, Xs, scale = _standardised(residual, X, train_mask)
     rows = np.flatnonzero(ok)
     beta, _ = _ridge_grouped_cv(Xs[rows], r[rows], _cv_groups(rows, run_start))
     pred = np.where(np.all(np.isfinite(X), axis=1), Xs @ beta, 0.0)
