@@ -72,6 +72,16 @@ print(k / seconds, flush=True)
 """
 
 
+def _interrupt(proc) -> None:
+    """SIGINT a child still running (a node ends cleanly on it); kill it after 10 s."""
+    if proc is not None and proc.poll() is None:
+        proc.send_signal(signal.SIGINT)
+        try:
+            proc.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+
+
 def model_step_cost(n: int = 50000) -> dict:
     from clutch_model import Plant, load_model
 
@@ -231,12 +241,7 @@ def run(seconds: float, rate: float, executor: str, flood_hz: float) -> dict:
             result["flood_achieved_hz"] = float(flood_proc.stdout.read().strip() or "nan")
     finally:
         for proc in (flood_proc, node_proc):
-            if proc is not None and proc.poll() is None:
-                proc.send_signal(signal.SIGINT)
-                try:
-                    proc.wait(timeout=10)
-                except subprocess.TimeoutExpired:
-                    proc.kill()
+            _interrupt(proc)
         result["node_exit_code"] = node_proc.returncode
         client.destroy_node()
         rclpy.try_shutdown()
@@ -334,13 +339,7 @@ def energy_keeping(seconds: float, rate: float, load: int) -> dict:
         for proc in busy:
             proc.terminate()
             proc.wait()
-        for proc in [node_proc]:
-            if proc.poll() is None:
-                proc.send_signal(signal.SIGINT)
-                try:
-                    proc.wait(timeout=10)
-                except subprocess.TimeoutExpired:
-                    proc.kill()
+        _interrupt(node_proc)
         result["node_exit_code"] = node_proc.returncode
         client.destroy_node()
         rclpy.try_shutdown()
