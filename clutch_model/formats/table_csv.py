@@ -109,26 +109,36 @@ def _block_python(prefix: str, cols: list, a: int, b: int) -> str:
     return "".join(prefix + ",".join(row) + EOL for row in zip(*map(fmt, cols)))
 
 
+def _column(c) -> np.ndarray:
+    c = np.asarray(c)
+    return c if c.dtype.kind in "iub" else np.asarray(c, dtype=np.float64)
+
+
+def write_block(write, prefix: bytes, cols: list) -> None:
+    """Rows of ``cols`` (equal-length columns; float columns: non-finite -> empty field;
+    integer/bool columns as integers) behind the label ``prefix`` (label and comma, CSV-quoted:
+    ``_label_prefix``), handed to ``write(data, rows)`` in blocks of at most BLOCK_ROWS rows."""
+    cols = [_column(c) for c in cols]
+    n = len(cols[0]) if cols else 0
+    orjson = _orjson()
+    for a in range(0, n, BLOCK_ROWS):
+        b = min(a + BLOCK_ROWS, n)
+        if orjson is not None:
+            write(format_block(orjson, prefix, [c[a:b] for c in cols]), b - a)
+        else:
+            write(_block_python(prefix.decode(), cols, a, b).encode(), b - a)
+
+
 def write_table_csv(path, header: list, blocks) -> Path:
     """Write ``header`` then, for every ``(label, columns)`` in ``blocks``, one row per sample:
     the label, then the columns' values (1-D arrays of equal length; float columns: non-finite
     -> empty field; integer/bool columns as integers)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    orjson = _orjson()
     with path.open("wb") as fh:
         fh.write((",".join(header) + EOL).encode())
         for label, cols in blocks:
-            cols = [np.asarray(c) if np.asarray(c).dtype.kind in "iub" else np.asarray(c, dtype=np.float64)
-                    for c in cols]
-            n = len(cols[0]) if cols else 0
-            prefix = _label_prefix(label)
-            for a in range(0, n, BLOCK_ROWS):
-                b = min(a + BLOCK_ROWS, n)
-                if orjson is not None:
-                    fh.write(format_block(orjson, prefix.encode(), [c[a:b] for c in cols]))
-                else:
-                    fh.write(_block_python(prefix, cols, a, b).encode())
+            write_block(lambda data, rows: fh.write(data), _label_prefix(label).encode(), cols)
             fh.flush()
             del cols                                # free this block's arrays before the next is made
     return path
