@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import math
 import os
+import time
 from collections import deque
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
@@ -63,6 +64,9 @@ class StreamedReplay:
     per_run: list = field(default_factory=list)
     torque: _Sums = field(default_factory=_Sums)
     pack: _Sums = field(default_factory=_Sums)
+    # CPU seconds per stage (each stage's own thread): decode + grid, simulate (+ measurement
+    # mechanisms and RMSE sums), format + write
+    cpu_s: dict = field(default_factory=lambda: {"decode": 0.0, "simulate": 0.0, "csv": 0.0})
 
     def rmse_torque(self) -> float:
         return self.torque.rmse
@@ -147,7 +151,8 @@ class _Inline:
 class _BagReplay:
     """One bag through the plant, block by block (runs in the simulation stage)."""
 
-    def __init__(self, model: ClutchModel, name: str, energy0_j: float, has_torque: bool, has_pack: bool):
+    def __init__(self, model: ClutchModel, name: str, energy0_j: float, has_torque: bool, has_pack: bool,
+                 cpu_s: dict):
         from clutch_model.plant.measurement_stream import MeasurementStream
         from clutch_model.plant.simulate import ChunkedSimulation
 
@@ -160,9 +165,11 @@ class _BagReplay:
         self.pack = SquareSums()
         self.any_pack = False
         self.rows = 0
+        self.cpu_s = cpu_s
 
     def simulate(self, block) -> list:
         """The block's OUT.csv columns; the RMSE sums updated."""
+        c0 = time.thread_time()
         res = self.sim.run(block.t, block.force, block.slip, block.sump, copy=False)
         plant = np.array(res.torque_nm)
         if self.measurement.chunkable:
@@ -186,6 +193,7 @@ class _BagReplay:
         if self.has_pack:
             cols.append(block.pack_measured if block.pack_measured is not None else np.full(n, np.nan))
         self.rows += n
+        self.cpu_s["simulate"] += time.thread_time() - c0
         return cols
 
 
@@ -195,11 +203,13 @@ def _label_prefix(name: str) -> bytes:
     return prefix(name).encode()
 
 
-def _format_and_write(out: _CsvOut, prefix: bytes, sim_future: Future) -> None:
+def _format_and_write(out: _CsvOut, prefix: bytes, sim_future: Future, cpu_s: dict) -> None:
     from clutch_model.formats.table_csv import write_block
 
     cols = sim_future.result()
+    c0 = time.thread_time()
     write_block(out.write, prefix, cols)
+    cpu_s["csv"] += time.thread_time() - c0
 
 
 def replay_bags(model: ClutchModel, paths, out_csv, topics: TopicNames = TopicNames(),
@@ -227,22 +237,29 @@ def replay_bags(model: ClutchModel, paths, out_csv, topics: TopicNames = TopicNa
     if threads:
         sim_stage = ThreadPoolExecutor(1, thread_name_prefix="replay-sim")
         out_stage = ThreadPoolExecutor(1, thread_name_prefix="replay-csv")
+        # load the compiled kernels in their stages' threads while the first bag is opened
+        sim_stage.submit(_warm_simulation, model)
+        out_stage.submit(_warm_csv)
     else:
         sim_stage = out_stage = _Inline()
     failed = True
     try:
         energy_j = None
         for k in order:
+            c0 = time.thread_time()
             bag = _open_bag(paths[k], topics, block_rows, model)
+            out.cpu_s["decode"] += time.thread_time() - c0
             if energy_j is None:       # what the model's campaign history knows at the first bag
                 energy_j = model.initial_energy_j(bag.start_time_ns)
             start = (csv_out.size, csv_out.rows)
             try:
-                run = _replay_bag(bag, model, energy_j, has_torque, has_pack, csv_out, sim_stage, out_stage)
+                run = _replay_bag(bag, model, energy_j, has_torque, has_pack, csv_out, sim_stage, out_stage,
+                                  out.cpu_s)
             except _BulkStopped:
                 csv_out.truncate(*start)     # take the bag's rows back; the general decoder reads it
                 bag = BagBlocks(paths[k], topics, _block_rows_for(model, block_rows), bulk=False)
-                run = _replay_bag(bag, model, energy_j, has_torque, has_pack, csv_out, sim_stage, out_stage)
+                run = _replay_bag(bag, model, energy_j, has_torque, has_pack, csv_out, sim_stage, out_stage,
+                                  out.cpu_s)
             energy_j = run.sim.energy_j
             torque, pack = _Sums(*run.torque.total()), _Sums(*run.pack.total())
             out.torque.add(torque.sq, torque.n)
@@ -261,6 +278,18 @@ def replay_bags(model: ClutchModel, paths, out_csv, topics: TopicNames = TopicNa
     return out
 
 
+def _warm_simulation(model: ClutchModel) -> None:
+    from clutch_model.plant.simulate import ChunkedSimulation
+
+    ChunkedSimulation(model).run([0.0, 1e-3], 0.0, 0.0, 50.0)
+
+
+def _warm_csv() -> None:
+    from clutch_model.formats.table_csv import write_block
+
+    write_block(lambda data, rows: None, b"x,", [np.zeros(2), np.zeros(2, np.int64)])
+
+
 class _BulkStopped(Exception):
     pass
 
@@ -276,25 +305,29 @@ def _open_bag(path: Path, topics: TopicNames, block_rows: int, model: ClutchMode
     return BagBlocks(path, topics, _block_rows_for(model, block_rows))
 
 
-def _replay_bag(bag: BagBlocks, model, energy_j, has_torque, has_pack, csv_out, sim_stage, out_stage) -> _BagReplay:
+def _replay_bag(bag: BagBlocks, model, energy_j, has_torque, has_pack, csv_out, sim_stage, out_stage,
+                cpu_s: dict) -> _BagReplay:
     """All blocks of one bag through the stages; raises _BulkStopped when the bulk stream stops."""
     from clutch_model.formats.mcap_bulk import NotBulk
 
-    run = _BagReplay(model, bag.name, energy_j, has_torque, has_pack)
+    run = _BagReplay(model, bag.name, energy_j, has_torque, has_pack, cpu_s)
     in_flight = deque()
     blocks = bag.blocks()
     try:
         while True:
+            c0 = time.thread_time()
             try:
                 block = next(blocks, None)
             except (NotBulk, IndexError):
                 if not bag.bulk:
                     raise
                 raise _BulkStopped from None
+            finally:
+                cpu_s["decode"] += time.thread_time() - c0
             if block is None:
                 break
             sim = sim_stage.submit(run.simulate, block)
-            in_flight.append(out_stage.submit(_format_and_write, csv_out, run.prefix, sim))
+            in_flight.append(out_stage.submit(_format_and_write, csv_out, run.prefix, sim, cpu_s))
             del block, sim
             while len(in_flight) > IN_FLIGHT:
                 in_flight.popleft().result()

@@ -1,64 +1,66 @@
 """Compiled assembly of CSV rows from per-column texts (``table_csv.format_block``)."""
 import numpy as np
-from numba import njit
+from numba import njit, uint64
 
-COMMA, OPEN, NULL_N, CR, LF = 44, 91, 110, 13, 10
+COMMA, NULL_N, CR, LF = 44, 110, 13, 10
 
 
-@njit(cache=True, nogil=True)
-def assemble_rows(text, bounds, row_field, prefix):
-    """CSV rows: ``prefix`` (row label and comma), then per column the field
-    ``row_field[c, k]`` of column c's JSON array text ``text[bounds[c, 0]:bounds[c, 1]]``
-    (``[v0,v1,...]``; ``null`` -> empty field), comma-separated, CRLF-terminated. Returns the
-    uint8 array of the rows."""
-    ncols, nrows = row_field.shape
-    # field j of column c spans starts[c, j] .. starts[c, j + 1] - 2 (the comma or bracket after it)
-    maxf = 0
-    counts = np.zeros(ncols, dtype=np.int64)
+@njit(cache=True, nogil=True, boundscheck=False)
+def assemble_rows(text, bounds, nfields, row_field, ident, prefix):
+    """CSV rows: ``prefix`` (row label and comma), then per column c its field (row k's own
+    if ``ident[c]``, else ``row_field[c, k]``) of the JSON array text
+    ``text[bounds[c, 0]:bounds[c, 1]]`` (``[v0,v1,...]``, ``nfields[c]`` values; ``null`` ->
+    empty field), comma-separated, CRLF-terminated. Returns the uint8 array of the rows.
+    (Unsigned indices: no negative-index wrap-around code in the byte loops.)"""
+    ncols = bounds.shape[0]
+    nrows = row_field.shape[1]
+    maxf = 1
     for c in range(ncols):
-        a, b = bounds[c, 0], bounds[c, 1]
-        m = 1
-        for i in range(a + 1, b - 1):
-            if text[i] == COMMA:
-                m += 1
-        counts[c] = m
-        if m > maxf:
-            maxf = m
-    starts = np.empty((ncols, maxf + 1), dtype=np.int64)
+        maxf = max(maxf, nfields[c])
+    fs = np.empty((ncols, maxf), dtype=np.uint64)    # field start
+    fl = np.empty((ncols, maxf), dtype=np.uint64)    # field length (0: null)
+    total = uint64(nrows * (prefix.size + ncols + 1))
     for c in range(ncols):
-        a, b = bounds[c, 0], bounds[c, 1]
+        a = uint64(bounds[c, 0] + 1)
+        b = uint64(bounds[c, 1] - 1)
         j = 0
-        starts[c, 0] = a + 1
-        for i in range(a + 1, b - 1):
+        s = a
+        i = a
+        while i < b:
             if text[i] == COMMA:
+                fs[c, j] = s
+                fl[c, j] = i - s
                 j += 1
-                starts[c, j] = i + 1
-        starts[c, j + 1] = b                    # one past the closing bracket
-    total = nrows * (prefix.size + ncols + 1)
-    for c in range(ncols):
-        for k in range(nrows):
-            j = row_field[c, k]
-            if text[starts[c, j]] != NULL_N:
-                total += starts[c, j + 1] - 1 - starts[c, j]
+                s = i + uint64(1)
+            i += uint64(1)
+        fs[c, j] = s
+        fl[c, j] = b - s
+        for f in range(j + 1):
+            if text[fs[c, f]] == NULL_N:
+                fl[c, f] = 0
+        if ident[c]:
+            for f in range(j + 1):
+                total += fl[c, f]
+        else:
+            for k in range(nrows):
+                total += fl[c, row_field[c, k]]
     out = np.empty(total, dtype=np.uint8)
-    o = 0
+    o = uint64(0)
+    npre = uint64(prefix.size)
     for k in range(nrows):
-        for i in range(prefix.size):
-            out[o] = prefix[i]
-            o += 1
+        for i in range(npre):
+            out[o + uint64(i)] = prefix[i]
+        o += npre
         for c in range(ncols):
-            if c:
-                out[o] = COMMA
-                o += 1
-            j = row_field[c, k]
-            a = starts[c, j]
-            b = starts[c, j + 1] - 1
-            if text[a] == NULL_N:
-                continue
-            for i in range(a, b):
-                out[o] = text[i]
-                o += 1
-        out[o] = CR
-        out[o + 1] = LF
-        o += 2
-    return out[:o]
+            f = k if ident[c] else row_field[c, k]
+            n_bytes = fl[c, f]
+            a = fs[c, f]
+            for i in range(n_bytes):
+                out[o + uint64(i)] = text[a + uint64(i)]
+            o += n_bytes
+            out[o] = COMMA
+            o += uint64(1)
+        out[o - uint64(1)] = CR                         # the last comma becomes the line end
+        out[o] = LF
+        o += uint64(1)
+    return out

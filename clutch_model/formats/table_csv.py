@@ -43,39 +43,36 @@ def format_block(orjson, prefix: bytes, cols: list):
     n = len(cols[0])
     if n == 0:
         return b""
-    texts, maps = [], []
-    for c in cols:
+    ncols = len(cols)
+    texts = []
+    nfields = np.full(ncols, n, dtype=np.int64)
+    ident = np.ones(ncols, dtype=np.bool_)
+    row_field = np.empty((ncols, n), dtype=np.int64)      # read only for the columns not ident
+    for j, c in enumerate(cols):
         c = np.ascontiguousarray(c)
-        field = None
         if c.dtype.kind == "f":
             if n > 64:
                 bits = c.view(np.int64)
                 change = np.empty(n, dtype=bool)
                 change[0] = True
                 np.not_equal(bits[1:], bits[:-1], out=change[1:])
-                if np.count_nonzero(change) * 4 < n:          # a held signal: format each run once
-                    field = np.cumsum(change, dtype=np.int64) - 1
+                runs = int(np.count_nonzero(change))
+                if runs * 4 < n:                          # a held signal: format each run once
+                    np.cumsum(change, dtype=np.int64, out=row_field[j])
+                    row_field[j] -= 1
+                    ident[j] = False
+                    nfields[j] = runs
                     c = c[change]
             texts.append(orjson.dumps(c, option=orjson.OPT_SERIALIZE_NUMPY))
         else:
             texts.append(orjson.dumps(c.astype(np.int64), option=orjson.OPT_SERIALIZE_NUMPY))
-        maps.append(field)
-    bounds = np.zeros((len(cols), 2), dtype=np.int64)
+    bounds = np.zeros((ncols, 2), dtype=np.int64)
     k = 0
     for j, text in enumerate(texts):
         bounds[j] = (k, k + len(text))
         k += len(text)
-    row_field = np.empty((len(cols), n), dtype=np.int64)
-    ident = None
-    for j, field in enumerate(maps):
-        if field is None:
-            if ident is None:
-                ident = np.arange(n, dtype=np.int64)
-            row_field[j] = ident
-        else:
-            row_field[j] = field
     text = np.frombuffer(b"".join(texts), dtype=np.uint8)
-    return assemble_rows(text, bounds, row_field, np.frombuffer(prefix, dtype=np.uint8))
+    return assemble_rows(text, bounds, nfields, row_field, ident, np.frombuffer(prefix, dtype=np.uint8))
 
 
 def _block_orjson(orjson, prefix: bytes, cols: list, a: int, b: int) -> bytes:
