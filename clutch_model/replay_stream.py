@@ -149,7 +149,8 @@ class _Inline:
 
 
 class _BagReplay:
-    """One bag through the plant, block by block (runs in the simulation stage)."""
+    """One bag through the plant and into OUT.csv, block by block (``simulate`` runs in the
+    simulation stage, ``write`` in the CSV stage)."""
 
     def __init__(self, model: ClutchModel, name: str, energy0_j: float, has_torque: bool, has_pack: bool,
                  cpu_s: dict):
@@ -167,8 +168,8 @@ class _BagReplay:
         self.rows = 0
         self.cpu_s = cpu_s
 
-    def simulate(self, block) -> list:
-        """The block's OUT.csv columns; the RMSE sums updated."""
+    def simulate(self, block) -> tuple:
+        """Simulation stage: (block, predicted measured torque, pack temperature, locked)."""
         c0 = time.thread_time()
         res = self.sim.run(block.t, block.force, block.slip, block.sump, copy=False)
         plant = np.array(res.torque_nm)
@@ -180,36 +181,36 @@ class _BagReplay:
             rs = np.zeros(len(block), bool)
             rs[0] = True
             torque = apply_measurement(self.model.mechanisms, block.t, plant, rs)
-        pack = np.array(res.pack_temperature_c)
-        cols = [block.t, torque, pack, res.locked.astype(np.int64)]
+        out = (block, torque, np.array(res.pack_temperature_c), res.locked)
+        self.cpu_s["simulate"] += time.thread_time() - c0
+        return out
+
+    def write(self, csv_out: "_CsvOut", sim_future: Future) -> None:
+        """CSV stage (blocks in order): the RMSE sums, then the block's OUT.csv rows."""
+        from clutch_model.formats.table_csv import write_block
+
+        block, torque, pack, locked = sim_future.result()
+        c0 = time.thread_time()
         n = len(block)
         if block.torque_measured is not None:
             self.torque.add(torque, block.torque_measured)
         if block.pack_measured is not None:
             self.any_pack = True
             self.pack.add(pack, block.pack_measured)
+        cols = [block.t, torque, pack, locked]
         if self.has_torque:
             cols.append(block.torque_measured if block.torque_measured is not None else np.full(n, np.nan))
         if self.has_pack:
             cols.append(block.pack_measured if block.pack_measured is not None else np.full(n, np.nan))
+        write_block(csv_out.write, self.prefix, cols)
         self.rows += n
-        self.cpu_s["simulate"] += time.thread_time() - c0
-        return cols
+        self.cpu_s["csv"] += time.thread_time() - c0
 
 
 def _label_prefix(name: str) -> bytes:
     from clutch_model.formats.table_csv import _label_prefix as prefix
 
     return prefix(name).encode()
-
-
-def _format_and_write(out: _CsvOut, prefix: bytes, sim_future: Future, cpu_s: dict) -> None:
-    from clutch_model.formats.table_csv import write_block
-
-    cols = sim_future.result()
-    c0 = time.thread_time()
-    write_block(out.write, prefix, cols)
-    cpu_s["csv"] += time.thread_time() - c0
 
 
 def replay_bags(model: ClutchModel, paths, out_csv, topics: TopicNames = TopicNames(),
@@ -327,7 +328,7 @@ def _replay_bag(bag: BagBlocks, model, energy_j, has_torque, has_pack, csv_out, 
             if block is None:
                 break
             sim = sim_stage.submit(run.simulate, block)
-            in_flight.append(out_stage.submit(_format_and_write, csv_out, run.prefix, sim, cpu_s))
+            in_flight.append(out_stage.submit(run.write, csv_out, sim))
             del block, sim
             while len(in_flight) > IN_FLIGHT:
                 in_flight.popleft().result()

@@ -108,7 +108,7 @@ class ChunkedSimulation:
     def __init__(self, model: ClutchModel, energy0_j: float = 0.0):
         self.model = model
         self._p = model.vector()
-        self._d = K.derived_constants(self._p)
+        self._d = None                        # on the first run (in the thread that simulates)
         self.state = np.zeros(K.N_STATE)
         self.state[K.S_ENERGY] = float(energy0_j)
         self.carry = np.zeros(K.N_CARRY)      # the last row simulated (time, slip, sump)
@@ -140,6 +140,8 @@ class ChunkedSimulation:
             if self._buf.shape[0] < n:
                 self._buf = np.zeros((n, K.N_OUT))
             out = self._buf[:n]
+        if self._d is None:
+            self._d = K.derived_constants(self._p)
         K.run_chunk(self._p, self._d, t, f, w, s, rs, self.state, self.carry, out)
         return _sim_result(t, out)
 
