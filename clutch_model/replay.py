@@ -80,7 +80,7 @@ class SquareSums:
             take = min(pred.size - a, SUM_BLOCK_ROWS - self._rows)
             p, m = pred[a:a + take], meas[a:a + take]
             ok = np.isfinite(m) & np.isfinite(p)
-            self._held.append(p[ok] - m[ok])
+            self._held.append(p - m if ok.all() else p[ok] - m[ok])
             self._rows += take
             a += take
             if self._rows == SUM_BLOCK_ROWS:

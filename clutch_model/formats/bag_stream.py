@@ -102,7 +102,12 @@ class BagBlocks:
                 ft = valid["force"][0]
                 rows = ft if (not ft.size or ft[0] >= t0) else ft[ft >= t0]
                 if rows.size:
-                    cols = [_latest_from(tail.get(topic), *valid[kind], rows) for kind, topic in inputs]
+                    fv = valid["force"][1]
+                    if np.all(ft[1:] > ft[:-1]):           # no repeated stamps: row k's force is its own sample
+                        force = fv[ft.size - rows.size:]
+                    else:
+                        force = _latest_from(tail.get(tp.applied_force), ft, fv, rows)
+                    cols = [force] + [_latest_from(tail.get(topic), *valid[kind], rows) for kind, topic in inputs[1:]]
                     meas = {topic: _latest_from(tail.get(topic), *batch.get(topic, empty), rows) for topic in measured}
                     n_rows += rows.size
                     yield ((rows - first_ns) * 1e-9, *cols, meas.get(tp.measured_torque),

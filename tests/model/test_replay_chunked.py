@@ -138,9 +138,11 @@ def long_signals(seconds=45.0, seed=3):
     t_slip[100:110] = t_slip[100]
     force = np.abs(rng.normal(5000, 2000, t.size))
     force[500] = np.nan
+    t_force = t.copy()
+    t_force[20000:20003] = t[20000]               # repeated force stamps: the row takes the last one
     tt = np.arange(int(seconds * 10)) / 10.0 + 0.00037
     return RunSignals(
-        applied_force=TopicSeries(t, force),
+        applied_force=TopicSeries(t_force, force),
         slip_speed=TopicSeries(t_slip, rng.normal(5, 1, t_slip.size)),
         sump_temperature=TopicSeries(tt, rng.normal(60, 0.3, tt.size), variance=0.09),
         measured_torque=TopicSeries(t + 0.0002, rng.normal(500, 100, t.size)),
