@@ -57,7 +57,8 @@ def mcap_file_of(path: Path) -> Path | None:
     import yaml
 
     try:
-        info = yaml.safe_load(meta.read_text())["rosbag2_bagfile_information"]
+        loader = getattr(yaml, "CSafeLoader", yaml.SafeLoader)    # libyaml when present: the same data
+        info = yaml.load(meta.read_text(), Loader=loader)["rosbag2_bagfile_information"]
     except Exception:
         return None
     if info.get("storage_identifier") != "mcap" or info.get("compression_format") or info.get("compression_mode"):

@@ -36,8 +36,9 @@ def _orjson():
 
 
 def format_block(orjson, prefix: bytes, cols: list):
-    """Rows of equal-length columns as CSV (a buffer: bytes or uint8 array; trailing EOL
-    included): the bytes ``_block_orjson`` writes, assembled without a Python loop per row."""
+    """Rows of equal-length columns as CSV (a uint8 array; trailing EOL included): every field
+    as orjson writes the column's value (``null`` -> empty), assembled without a Python loop
+    per row."""
     from clutch_model.formats.csv_kernels import assemble_rows
 
     n = len(cols[0])
@@ -73,29 +74,6 @@ def format_block(orjson, prefix: bytes, cols: list):
         k += len(text)
     text = np.frombuffer(b"".join(texts), dtype=np.uint8)
     return assemble_rows(text, bounds, nfields, row_field, ident, np.frombuffer(prefix, dtype=np.uint8))
-
-
-def _block_orjson(orjson, prefix: bytes, cols: list, a: int, b: int) -> bytes:
-    """Rows a:b as CSV bytes (trailing EOL included)."""
-    floats = [c for c in cols if c.dtype.kind == "f"]
-    if len(floats) == len(cols):
-        block = np.column_stack([c[a:b] for c in cols])
-        body = orjson.dumps(block, option=orjson.OPT_SERIALIZE_NUMPY)[2:-2]
-        if not np.isfinite(block).all():
-            body = body.replace(b"null", b"")
-        body = body.replace(b"],[", EOL.encode() + prefix)
-        return prefix + body + EOL.encode()
-    # mixed kinds (integer flags): each column formatted alone, rows joined
-    parts = []
-    for c in cols:
-        c = np.ascontiguousarray(c[a:b])
-        if c.dtype.kind == "f":
-            text = orjson.dumps(c, option=orjson.OPT_SERIALIZE_NUMPY)[1:-1].replace(b"null", b"")
-        else:
-            text = orjson.dumps(c.astype(np.int64), option=orjson.OPT_SERIALIZE_NUMPY)[1:-1]
-        parts.append(text.split(b","))
-    eol = EOL.encode()
-    return b"".join(prefix + b",".join(row) + eol for row in zip(*parts))
 
 
 def _block_python(prefix: str, cols: list, a: int, b: int) -> str:
