@@ -6,11 +6,13 @@ runs of at most 10 minutes, MCAP rosbag2 directories: force, slip and measured t
 engagement profiles, the measured torque = RC-1's torque + noise — then runs
 `clutch-sim replay` on it as a separate process and prints its wall time, peak memory
 (getrusage of that child: ru_maxrss) and cost per simulated second, plus the multiple of real
-time. Process start-up (imports, numba cache load) is included, as a user sees it; the
-in-process breakdown (decode / simulate / CSV) is printed for the shortest campaign.
+time, in wall time and in CPU time (user + system, which a loaded machine inflates far less).
+Process start-up (imports, numba cache load) is included, as a user sees it. The in-process
+split — CPU seconds of each pipeline stage (decode + grid, simulate, CSV), each on its own
+thread — is printed for the shortest campaign (``--split``: for every campaign).
 
 Usage: python bench/bench_scaling.py [--minutes 1 10 60] [--run-minutes 10] [--workdir DIR] [--keep]
-       [--diagnose]
+       [--split] [--diagnose]
 `--diagnose` also times `clutch-sim diagnose` the same way (hook: the diagnosis' own scaling
 work decides its options; see DIAGNOSE_ARGS). Figures are upper bounds on a shared machine:
 the load average is printed with them.
@@ -134,21 +136,19 @@ def timed_process(cmd: list, env: dict) -> tuple[float, float, float, int, str]:
 
 
 def breakdown(bags, out_csv: Path) -> dict:
-    """In-process split of a replay in CPU s: decode, simulate (+ measured-torque prediction), CSV."""
-    from clutch_model.formats.bag_reader import read_bags
+    """In-process split of a replay (`replay_bags`, the command's pipeline) in CPU s per stage:
+    decode + grid, simulate (+ measured-torque prediction, RMSE sums), CSV (format + write);
+    plus the wall and CPU time of the whole (without process start-up)."""
     from clutch_model.plant.params import load_model
-    from clutch_model.replay import replay_runs, write_replay_csv
+    from clutch_model.replay_stream import replay_bags
 
     model = load_model(None)
-    clock = time.process_time                 # CPU seconds: readable on a loaded machine
-    t0 = clock()
-    runs = read_bags(bags)
-    t1 = clock()
-    res = replay_runs(model, runs)
-    t2 = clock()
-    write_replay_csv(res, out_csv)
-    t3 = clock()
-    return {"decode_s": t1 - t0, "simulate_s": t2 - t1, "csv_s": t3 - t2, "rows": int(sum(len(r) for r in runs))}
+    replay_bags(model, [ROOT / "bags" / "run_00"], out_csv)       # kernels loaded
+    w0, c0 = time.perf_counter(), time.process_time()
+    res = replay_bags(model, bags, out_csv)
+    wall, cpu = time.perf_counter() - w0, time.process_time() - c0
+    return {"decode_s": res.cpu_s["decode"], "simulate_s": res.cpu_s["simulate"], "csv_s": res.cpu_s["csv"],
+            "wall_s": wall, "cpu_s": cpu, "rows": res.rows}
 
 
 def main(argv=None) -> int:
@@ -158,6 +158,7 @@ def main(argv=None) -> int:
     ap.add_argument("--run-minutes", type=float, default=RUN_MAX_S / 60.0,
                     help="longest bag of a campaign (default %(default)g min; 60 = one bag per hour)")
     ap.add_argument("--keep", action="store_true", help="keep the campaigns and outputs")
+    ap.add_argument("--split", action="store_true", help="in-process stage split for every campaign")
     ap.add_argument("--diagnose", action="store_true", help="also time `clutch-sim diagnose` on each campaign")
     args = ap.parse_args(argv)
 
@@ -199,11 +200,12 @@ def main(argv=None) -> int:
                 print(f"{'':8} diagnose: {dwall:.1f} s (cpu {dcpu:.1f} s), {1e3 * dwall / sim_s:.1f} ms per simulated s, "
                       f"peak {drss:.0f} MB" + ("" if drc == 0 else f" (failed: {dlast})"), flush=True)
             rows.append(row)
-            if minutes == min(args.minutes):
+            if args.split or minutes == min(args.minutes):
                 b = breakdown(bags, camp / "replay_inproc.csv")
-                tot = b["decode_s"] + b["simulate_s"] + b["csv_s"]
-                print(f"{'':8} in-process split (CPU): decode {b['decode_s']:.2f} s, simulate {b['simulate_s']:.2f} s, "
-                      f"CSV {b['csv_s']:.2f} s ({sim_s / tot:.0f}x real time without process start-up)")
+                print(f"{'':8} in-process (no start-up): wall {b['wall_s']:.2f} s, CPU {b['cpu_s']:.2f} s "
+                      f"({sim_s / b['wall_s']:.0f}x / {sim_s / b['cpu_s']:.0f}x real time); CPU per stage: "
+                      f"decode {b['decode_s']:.2f} s, simulate {b['simulate_s']:.2f} s, CSV {b['csv_s']:.2f} s",
+                      flush=True)
             if not args.keep:
                 shutil.rmtree(camp, ignore_errors=True)
     finally:

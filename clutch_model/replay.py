@@ -27,18 +27,23 @@ class ReplayResult:
     torque_sim: np.ndarray       # predicted measured torque (measurement mechanisms applied)
 
     def rmse_torque(self, names=None) -> float:
-        return _rmse(self.torque_sim, self.campaign.torque_measured, self._mask(names))
+        return self._rmse(names, lambda r, sl: (self.torque_sim[sl], self.campaign.torque_measured[sl]))
 
     def rmse_pack_temperature(self, names=None) -> float:
-        meas = np.concatenate([r.pack_temperature_measured_c if r.pack_temperature_measured_c is not None
-                               else np.full(len(r), np.nan) for r in self.campaign.runs])
-        return _rmse(self.sim.pack_temperature_c, meas, self._mask(names))
+        return self._rmse(names, lambda r, sl: (self.sim.pack_temperature_c[sl], r.pack_temperature_measured_c))
 
-    def _mask(self, names):
-        if names is None:
-            return np.ones(self.torque_sim.size, bool)
-        keep = {j for j, r in enumerate(self.campaign.runs) if r.name in set(names)}
-        return np.isin(self.campaign.run_index, list(keep))
+    def _rmse(self, names, pair) -> float:
+        """RMSE over the runs named (all by default), summed run by run in run order."""
+        keep = None if names is None else set(names)
+        sq, n = 0.0, 0
+        for r, sl in self.campaign.slices():
+            if keep is None or r.name in keep:
+                pred, meas = pair(r, sl)
+                if meas is not None:
+                    s, m = sum_squares(pred, meas)
+                    sq += s
+                    n += m
+        return math.sqrt(sq / n) if n else math.nan
 
     def per_run(self):
         """[(name, torque RMSE, pack temperature RMSE or nan, rows)] in run order."""
@@ -51,15 +56,60 @@ class ReplayResult:
         return rows
 
 
-def _rmse(pred, meas, mask=None):
-    pred = np.asarray(pred, float)
-    meas = np.asarray(meas, float)
-    ok = np.isfinite(meas) & np.isfinite(pred)
-    if mask is not None:
-        ok &= mask
-    if not ok.any():
-        return math.nan
-    return float(np.sqrt(np.mean((pred[ok] - meas[ok]) ** 2)))
+SUM_BLOCK_ROWS = 1 << 16
+
+
+class SquareSums:
+    """Sum of squared differences (and their count) over the rows where prediction and
+    measurement are both finite, fed the consecutive rows of one run in pieces of any size:
+    summed per window of SUM_BLOCK_ROWS rows of the run (numpy's pairwise sum inside a window),
+    the windows added in order. A run fed whole or in blocks gives the same float, so the
+    block-wise replay (``replay_stream``) prints the RMSEs of the whole one."""
+
+    def __init__(self):
+        self.sq = 0.0
+        self.n = 0
+        self._held = []
+        self._rows = 0
+
+    def add(self, pred, meas) -> "SquareSums":
+        pred = np.asarray(pred, float)
+        meas = np.asarray(meas, float)
+        a = 0
+        while a < pred.size:
+            take = min(pred.size - a, SUM_BLOCK_ROWS - self._rows)
+            p, m = pred[a:a + take], meas[a:a + take]
+            ok = np.isfinite(m) & np.isfinite(p)
+            self._held.append(p - m if ok.all() else p[ok] - m[ok])
+            self._rows += take
+            a += take
+            if self._rows == SUM_BLOCK_ROWS:
+                self._flush()
+        return self
+
+    def _flush(self) -> None:
+        d = self._held[0] if len(self._held) == 1 else np.concatenate(self._held)
+        if d.size:
+            self.sq += float(np.sum(d ** 2))
+            self.n += int(d.size)
+        self._held, self._rows = [], 0
+
+    def total(self) -> tuple[float, int]:
+        """(sum of squares, count) of everything added (the window so far included)."""
+        if self._rows:
+            self._flush()
+        return self.sq, self.n
+
+
+def sum_squares(pred, meas) -> tuple[float, int]:
+    """(sum of squared differences, count) over one run's rows where both are finite
+    (``SquareSums``)."""
+    return SquareSums().add(pred, meas).total()
+
+
+def _rmse(pred, meas) -> float:
+    sq, n = sum_squares(pred, meas)
+    return math.sqrt(sq / n) if n else math.nan
 
 
 def replay_runs(model: ClutchModel, runs, energy0_j: float | None = None) -> ReplayResult:

@@ -57,7 +57,8 @@ def mcap_file_of(path: Path) -> Path | None:
     import yaml
 
     try:
-        info = yaml.safe_load(meta.read_text())["rosbag2_bagfile_information"]
+        loader = getattr(yaml, "CSafeLoader", yaml.SafeLoader)    # libyaml when present: the same data
+        info = yaml.load(meta.read_text(), Loader=loader)["rosbag2_bagfile_information"]
     except Exception:
         return None
     if info.get("storage_identifier") != "mcap" or info.get("compression_format") or info.get("compression_mode"):
@@ -155,72 +156,90 @@ def read_scalar_topics(path, wanted) -> tuple[dict, int] | None:
         return None
 
 
-def _read(f: Path, wanted: set) -> tuple[dict, int]:
+def _open_summary(fh, wanted: set):
+    """(summary, {channel id: (topic, message type)} of the wanted topics, chunk indexes in file
+    order); NotBulk when the bag cannot take the bulk path."""
     from mcap.exceptions import McapError
     from mcap.reader import SeekingReader
 
+    try:
+        summary = SeekingReader(fh).get_summary()
+    except (McapError, struct.error, ValueError, EOFError) as exc:
+        raise NotBulk(str(exc)) from None
+    if summary is None or not summary.chunk_indexes or summary.statistics is None:
+        raise NotBulk("no summary / chunk index")
+    if summary.statistics.message_count == 0:
+        raise NotBulk("no messages")   # the general path words the error
+    channels = {}
+    for cid, ch in summary.channels.items():
+        if ch.topic not in wanted:
+            continue
+        schema = summary.schemas.get(ch.schema_id)
+        if ch.message_encoding != "cdr" or schema is None or schema.name not in SUPPORTED:
+            raise NotBulk(f"{ch.topic}: not a bulk-decodable type")
+        channels[cid] = (ch.topic, schema.name)
+    chunks = sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset)
+    return summary, channels, chunks
+
+
+def _chunk_parts(fh, ci, ordinal: int, channels: dict, counts: dict) -> list:
+    """[(topic, log times, positions, values)] of the wanted channels' messages in one chunk
+    (position = chunk ordinal << 32 | record offset: rosbags' order among equal log times)."""
+    mine = [cid for cid in channels if cid in ci.message_index_offsets]
+    if not mine:
+        if any(counts.get(cid, 0) for cid in channels) and not ci.message_index_offsets:
+            raise NotBulk("chunk without message index")
+        return []
+    if ci.uncompressed_size >= 1 << 32:
+        raise NotBulk("chunk of 4 GiB or more")
+    fh.seek(ci.chunk_start_offset)
+    head = fh.read(9 + 8 + 8 + 8 + 4 + 4)
+    if len(head) < 41 or head[0] != 0x06:
+        raise NotBulk("not a chunk record")
+    (crc, clen) = struct.unpack_from("<II", head, 33)
+    compression = fh.read(clen).decode()
+    (records_len,) = struct.unpack("<Q", fh.read(8))
+    raw = _decompress(fh.read(records_len), compression, ci.uncompressed_size)
+    if crc and zlib.crc32(raw) != crc:
+        raise NotBulk("chunk checksum mismatch")   # the general path reports it
+    buf = np.frombuffer(raw, dtype=np.uint8)
+    index_start = ci.chunk_start_offset + ci.chunk_length
+    fh.seek(index_start)
+    index_block = fh.read(ci.message_index_length)
+    parts = []
+    for cid in mine:
+        at = ci.message_index_offsets[cid] - index_start
+        if index_block[at] != MESSAGE_INDEX_OPCODE:
+            raise NotBulk("not a message index record")
+        (rec_cid, nbytes) = struct.unpack_from("<HI", index_block, at + 9)
+        if rec_cid != cid or nbytes % 16:
+            raise NotBulk("message index mismatch")
+        entries = np.frombuffer(index_block, dtype="<u8", count=nbytes // 8, offset=at + 15)
+        rec = entries[1::2].astype(np.int64)
+        if rec.size == 0:
+            continue
+        if not np.all(rec[1:] > rec[:-1]):
+            rec.sort()
+        if rec[0] < 0:
+            raise NotBulk("message offset outside the chunk")
+        topic, msgtype = channels[cid]
+        log_time, values = _decode(buf, rec, cid, msgtype)
+        parts.append((topic, log_time, rec + (ordinal << 32), values))
+    return parts
+
+
+def _first_time(summary, chunks) -> int:
+    return min(int(summary.statistics.message_start_time), min(int(c.message_start_time) for c in chunks))
+
+
+def _read(f: Path, wanted: set) -> tuple[dict, int]:
     with f.open("rb") as fh:
-        try:
-            summary = SeekingReader(fh).get_summary()
-        except (McapError, struct.error, ValueError, EOFError) as exc:
-            raise NotBulk(str(exc)) from None
-        if summary is None or not summary.chunk_indexes or summary.statistics is None:
-            raise NotBulk("no summary / chunk index")
-        stats = summary.statistics
-        if stats.message_count == 0:
-            raise NotBulk("no messages")   # the general path words the error
-        channels = {}
-        for cid, ch in summary.channels.items():
-            if ch.topic not in wanted:
-                continue
-            schema = summary.schemas.get(ch.schema_id)
-            if ch.message_encoding != "cdr" or schema is None or schema.name not in SUPPORTED:
-                raise NotBulk(f"{ch.topic}: not a bulk-decodable type")
-            channels[cid] = (ch.topic, schema.name)
+        summary, channels, chunks = _open_summary(fh, wanted)
+        counts = summary.statistics.channel_message_counts
         parts = {topic: [] for topic, _ in channels.values()}
-        chunks = sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset)
         for ordinal, ci in enumerate(chunks):
-            mine = [cid for cid in channels if cid in ci.message_index_offsets]
-            counts = stats.channel_message_counts
-            if not mine:
-                if any(counts.get(cid, 0) for cid in channels) and not ci.message_index_offsets:
-                    raise NotBulk("chunk without message index")
-                continue
-            if ci.uncompressed_size >= 1 << 32:
-                raise NotBulk("chunk of 4 GiB or more")
-            fh.seek(ci.chunk_start_offset)
-            head = fh.read(9 + 8 + 8 + 8 + 4 + 4)
-            if len(head) < 41 or head[0] != 0x06:
-                raise NotBulk("not a chunk record")
-            (crc, clen) = struct.unpack_from("<II", head, 33)
-            compression = fh.read(clen).decode()
-            (records_len,) = struct.unpack("<Q", fh.read(8))
-            raw = _decompress(fh.read(records_len), compression, ci.uncompressed_size)
-            if crc and zlib.crc32(raw) != crc:
-                raise NotBulk("chunk checksum mismatch")   # the general path reports it
-            buf = np.frombuffer(raw, dtype=np.uint8)
-            index_start = ci.chunk_start_offset + ci.chunk_length
-            fh.seek(index_start)
-            index_block = fh.read(ci.message_index_length)
-            for cid in mine:
-                at = ci.message_index_offsets[cid] - index_start
-                if index_block[at] != MESSAGE_INDEX_OPCODE:
-                    raise NotBulk("not a message index record")
-                (rec_cid, nbytes) = struct.unpack_from("<HI", index_block, at + 9)
-                if rec_cid != cid or nbytes % 16:
-                    raise NotBulk("message index mismatch")
-                entries = np.frombuffer(index_block, dtype="<u8", count=nbytes // 8, offset=at + 15)
-                rec = entries[1::2].astype(np.int64)
-                if rec.size == 0:
-                    continue
-                if not np.all(rec[1:] > rec[:-1]):
-                    rec.sort()
-                if rec[0] < 0:
-                    raise NotBulk("message offset outside the chunk")
-                topic, msgtype = channels[cid]
-                log_time, values = _decode(buf, rec, cid, msgtype)
-                parts[topic].append((log_time, rec + (ordinal << 32), values))   # position: chunk, record
-            del buf, raw
+            for topic, log_time, position, values in _chunk_parts(fh, ci, ordinal, channels, counts):
+                parts[topic].append((log_time, position, values))
         series = {}
         for topic, items in list(parts.items()):
             if not items:
@@ -234,8 +253,82 @@ def _read(f: Path, wanted: set) -> tuple[dict, int]:
                 order = np.lexsort((position, times))
                 series[topic] = (times[order], values[order])
             parts[topic] = None
-        first = min(int(stats.message_start_time), min(int(c.message_start_time) for c in chunks))
-        return series, first
+        return series, _first_time(summary, chunks)
+
+
+_EMPTY = (np.zeros(0, np.int64), np.zeros(0))
+
+
+class ScalarStream:
+    """The wanted topics of an MCAP bag decoded in bulk one chunk at a time (memory bounded by
+    a chunk, not the bag): ``batches()`` yields ``{topic: (log_times_ns, values)}`` of the
+    samples that are final — every later sample has a later log time — in the order
+    ``read_scalar_topics`` gives them; the batches of a topic concatenated are its series
+    there, bit for bit. Open with ``scalar_stream``; iterating may still raise ``NotBulk``
+    (a corrupt chunk) after some batches: the caller then starts over with the general decoder.
+    """
+
+    def __init__(self, f: Path, wanted: set):
+        self.file = f
+        with f.open("rb") as fh:
+            summary, self._channels, self._chunks = _open_summary(fh, wanted)
+        for ci in self._chunks:
+            if ci.compression not in ("", "lz4", "zstd"):
+                raise NotBulk(f"chunk compression {ci.compression!r}")
+        self._counts = dict(summary.statistics.channel_message_counts)
+        self.first_ns = _first_time(summary, self._chunks)
+        self.topics = {topic for cid, (topic, _) in self._channels.items() if self._counts.get(cid, 0) > 0}
+
+    def batches(self):
+        chunks = self._chunks
+        # watermark after chunk j: the earliest log time any later chunk (file order) holds
+        later_start = [0] * len(chunks)
+        low = None
+        for j in range(len(chunks) - 1, -1, -1):
+            later_start[j] = low
+            s = int(chunks[j].message_start_time)
+            low = s if low is None else min(low, s)
+        topics = sorted({topic for topic, _ in self._channels.values()})
+        pending = {topic: None for topic in topics}    # (times, positions, values), sorted
+        with self.file.open("rb") as fh:
+            for ordinal, ci in enumerate(chunks):
+                got = {}
+                for topic, log_time, position, values in _chunk_parts(fh, ci, ordinal, self._channels, self._counts):
+                    if log_time.min() < int(ci.message_start_time):
+                        raise NotBulk("chunk index start time after a message of the chunk")
+                    got.setdefault(topic, []).append((log_time, position, values))
+                mark = later_start[ordinal]
+                out = {}
+                for topic in topics:
+                    items = ([pending[topic]] if pending[topic] is not None else []) + got.get(topic, [])
+                    if not items:
+                        continue
+                    if len(items) == 1:
+                        times, position, values = items[0]
+                    else:
+                        times = np.concatenate([p[0] for p in items])
+                        position = np.concatenate([p[1] for p in items])
+                        values = np.concatenate([p[2] for p in items])
+                    if times.size > 1 and not np.all(times[1:] >= times[:-1]):
+                        order = np.lexsort((position, times))
+                        times, position, values = times[order], position[order], values[order]
+                    cut = times.size if mark is None else int(np.searchsorted(times, mark, side="left"))
+                    if cut:
+                        out[topic] = (times[:cut], values[:cut])
+                    pending[topic] = (times[cut:], position[cut:], values[cut:]) if cut < times.size else None
+                if out:
+                    yield out
+
+
+def scalar_stream(path, wanted) -> ScalarStream | None:
+    """A ``ScalarStream`` of an MCAP bag, or None when it needs the general decoder."""
+    f = mcap_file_of(Path(path))
+    if f is None:
+        return None
+    try:
+        return ScalarStream(f, set(wanted))
+    except (NotBulk, IndexError):
+        return None
 
 
 def mcap_header(path) -> tuple[int, set] | None:

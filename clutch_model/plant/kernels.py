@@ -496,3 +496,31 @@ def run_batch(pmat, t, force, slip, sump, run_start, energy0):
             torque[j, k] = _row(k, state, p, d, t, force, slip, sump, run_start, scratch, out)
             theta[j, k] = out[O_THETA]
     return torque, theta
+
+
+# carry of a trajectory between chunks (``run_chunk``): the row before the chunk's first row
+C_T, C_SLIP, C_SUMP, C_HAS_PREV = 0, 1, 2, 3
+N_CARRY = 4
+
+
+@njit(cache=True, nogil=True)
+def run_chunk(p, d, t, force, slip, sump, run_start, state, carry, out):
+    """``run_trajectory`` one chunk at a time: rows of ``t``.. continue from ``state`` (the
+    plant state after the previous chunk's last row) and ``carry`` (that row's time, slip and
+    sump: row 0 is advanced from it unless it starts a run). The same row code in the same
+    order as run_trajectory, so chunked runs equal the whole run bit for bit. Writes
+    out[:n] (n = t.size), updates state and carry. Releases the GIL."""
+    n = t.size
+    scratch = np.zeros(N_OUT)
+    for k in range(n):
+        if k == 0 and carry[C_HAS_PREV] > 0.0 and not run_start[0]:
+            advance(state, carry[C_SLIP], carry[C_SUMP], t[0] - carry[C_T], p, d, scratch)
+            pack_force_target(state, force[0], p)
+            outputs(state, slip[0], sump[0], p, d, out[0])
+        else:
+            _row(k, state, p, d, t, force, slip, sump, run_start, scratch, out[k])
+    if n:
+        carry[C_T] = t[n - 1]
+        carry[C_SLIP] = slip[n - 1]
+        carry[C_SUMP] = sump[n - 1]
+        carry[C_HAS_PREV] = 1.0

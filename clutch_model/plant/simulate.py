@@ -5,7 +5,9 @@ plain arrays in, a result object out.
 - ``simulate_batch``: many parameter sets on the same inputs (Monte Carlo), in parallel.
 - ``Plant``: the real-time step simulator the ROS node drives (state in, inputs held over
   dt, state out).
-All three run the same kernel functions (clutch_model.plant.kernels).
+- ``ChunkedSimulation``: ``simulate`` one chunk of rows at a time, resuming from the state at
+  the chunk boundary (memory bounded by a chunk; the same numbers as one call, bit for bit).
+All of them run the same kernel functions (clutch_model.plant.kernels).
 """
 from __future__ import annotations
 
@@ -65,6 +67,18 @@ def _as_inputs(t, applied_force_n, slip_speed_rad_s, sump_temperature_c, run_sta
     return t, f, w, s, rs
 
 
+def _sim_result(t, out) -> SimResult:
+    return SimResult(
+        t=t, torque_nm=out[:, K.O_TORQUE], asperity_torque_nm=out[:, K.O_TA],
+        hydrodynamic_torque_nm=out[:, K.O_TH], drag_torque_nm=out[:, K.O_DRAG],
+        friction_coefficient=out[:, K.O_MU], film_thickness_m=out[:, K.O_H],
+        pack_temperature_c=out[:, K.O_THETA], viscosity_pa_s=out[:, K.O_VISC],
+        power_w=out[:, K.O_POWER], energy_j=out[:, K.O_ENERGY], locked=out[:, K.O_LOCKED] > 0.5,
+        pack_force_n=out[:, K.O_FPACK], force_clamped=out[:, K.O_CLAMPED] > 0.5,
+        pressure_mpa=out[:, K.O_PRESSURE_MPA], out_of_range=out[:, K.O_RANGE] > 0.5,
+        asperity_pressure_pa=out[:, K.O_PA])
+
+
 def simulate(model: ClutchModel, t, applied_force_n, slip_speed_rad_s, sump_temperature_c,
              run_start=None, energy0_j: float = 0.0) -> SimResult:
     """Simulate the plant over sampled inputs (zero-order hold between samples).
@@ -75,15 +89,61 @@ def simulate(model: ClutchModel, t, applied_force_n, slip_speed_rad_s, sump_temp
     """
     t, f, w, s, rs = _as_inputs(t, applied_force_n, slip_speed_rad_s, sump_temperature_c, run_start)
     out = K.run_trajectory(model.vector(), t, f, w, s, rs, float(energy0_j))
-    return SimResult(
-        t=t, torque_nm=out[:, K.O_TORQUE], asperity_torque_nm=out[:, K.O_TA],
-        hydrodynamic_torque_nm=out[:, K.O_TH], drag_torque_nm=out[:, K.O_DRAG],
-        friction_coefficient=out[:, K.O_MU], film_thickness_m=out[:, K.O_H],
-        pack_temperature_c=out[:, K.O_THETA], viscosity_pa_s=out[:, K.O_VISC],
-        power_w=out[:, K.O_POWER], energy_j=out[:, K.O_ENERGY], locked=out[:, K.O_LOCKED] > 0.5,
-        pack_force_n=out[:, K.O_FPACK], force_clamped=out[:, K.O_CLAMPED] > 0.5,
-        pressure_mpa=out[:, K.O_PRESSURE_MPA], out_of_range=out[:, K.O_RANGE] > 0.5,
-        asperity_pressure_pa=out[:, K.O_PA])
+    return _sim_result(t, out)
+
+
+class ChunkedSimulation:
+    """``simulate`` over consecutive chunks of rows: each ``run`` continues from the plant
+    state after the previous chunk's last row (film, pack temperature, actuator lag and
+    hysteresis, energy, slip sign and angle, discovered-term filters, and that row's inputs,
+    which are held over the step into the next chunk). Splitting the rows anywhere — mid
+    engagement included — gives the numbers of one ``simulate`` call bit for bit (the kernel
+    runs the same row code in the same order). The kernel releases the GIL.
+
+    >>> sim = ChunkedSimulation(model, energy0_j=0.0)
+    >>> for t, f, w, s in chunks:          # the first chunk starts a run
+    ...     res = sim.run(t, f, w, s)      # SimResult of these rows
+    """
+
+    def __init__(self, model: ClutchModel, energy0_j: float = 0.0):
+        self.model = model
+        self._p = model.vector()
+        self._d = None                        # on the first run (in the thread that simulates)
+        self.state = np.zeros(K.N_STATE)
+        self.state[K.S_ENERGY] = float(energy0_j)
+        self.carry = np.zeros(K.N_CARRY)      # the last row simulated (time, slip, sump)
+        self._buf = np.zeros((0, K.N_OUT))
+
+    @property
+    def energy_j(self) -> float:
+        return float(self.state[K.S_ENERGY])
+
+    def run(self, t, applied_force_n, slip_speed_rad_s, sump_temperature_c, run_start=None,
+            copy: bool = True) -> SimResult:
+        """Simulate the next rows; ``run_start`` marks rows that restart the plant (the very
+        first row always does). ``copy=False``: the result's arrays are views of a buffer the
+        next call overwrites."""
+        t = np.ascontiguousarray(t, dtype=float)
+        n = t.size
+        f = np.ascontiguousarray(np.broadcast_to(np.asarray(applied_force_n, float), (n,)))
+        w = np.ascontiguousarray(np.broadcast_to(np.asarray(slip_speed_rad_s, float), (n,)))
+        s = np.ascontiguousarray(np.broadcast_to(np.asarray(sump_temperature_c, float), (n,)))
+        rs = np.zeros(n, dtype=np.bool_) if run_start is None else np.array(run_start, dtype=np.bool_)
+        if n and self.carry[K.C_HAS_PREV] == 0.0:
+            rs[0] = True
+        for name, arr in (("time", t), ("applied force", f), ("slip speed", w), ("sump temperature", s)):
+            if not np.all(np.isfinite(arr)):
+                raise ValueError(f"{name} has non-finite samples")
+        if copy:
+            out = np.zeros((n, K.N_OUT))
+        else:
+            if self._buf.shape[0] < n:
+                self._buf = np.zeros((n, K.N_OUT))
+            out = self._buf[:n]
+        if self._d is None:
+            self._d = K.derived_constants(self._p)
+        K.run_chunk(self._p, self._d, t, f, w, s, rs, self.state, self.carry, out)
+        return _sim_result(t, out)
 
 
 def predict_measured_torque(model: ClutchModel, t, torque_nm, run_start=None) -> np.ndarray:

@@ -21,12 +21,27 @@ def add_parser(sub):
     p.set_defaults(func=run)
 
 
+def _keep_freed_memory() -> None:
+    """glibc malloc: serve the per-block arrays (up to 32 MB) from the heap and keep freed
+    pages for the next block, instead of an mmap/munmap and fresh page faults per array (half
+    the page faults, a third of the system time of a replay). Elsewhere: nothing."""
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL("libc.so.6")
+        libc.mallopt(-3, 1 << 25)          # M_MMAP_THRESHOLD (its maximum on 64-bit)
+        libc.mallopt(-1, 1 << 28)          # M_TRIM_THRESHOLD
+    except (OSError, AttributeError):
+        pass
+
+
 def run(args) -> int:
     from clutch_model.plant.params import load_model
     from clutch_model.replay_stream import replay_bags
 
     from clutch_sim.commands._common import topics_from_args
 
+    _keep_freed_memory()
     model = load_model(args.params)
     # bag by bag (memory bounded by the largest bag), the same numbers as the whole campaign at once
     result = replay_bags(model, args.bags, args.out, topics_from_args(args), progress=True)
