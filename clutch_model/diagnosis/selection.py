@@ -182,6 +182,39 @@ def _remainder_test(data, resid, alpha, min_gain_frac, max_order):
     return res
 
 
+BACKFIT_PASSES = 3
+
+
+def _backfit(data: SelectionData, named: list, cand_by_id: dict, current):
+    """Once a second cause is named, the earlier ones are refitted on top of the others
+    (backfitting: each cause's own parameters with every other cause in the model, a few
+    passes, a refit kept when it lowers the training error). An earlier cause was fitted while
+    the later one was missing, and a cause that resembles the missing one absorbs part of it
+    (a spring preload fitted alone takes part of a torque offset: 246 N instead of 418 N).
+    The causes' fitted objects and parameters are updated; -> the model with every cause."""
+    best_mse = _train_mse(data, current)
+    for _ in range(BACKFIT_PASSES):
+        moved = False
+        for k, cause in enumerate(named):
+            cand = cand_by_id.get(cause.id)
+            if cand is None:
+                continue
+            others = tuple(c.id for c in named if c.id != cause.id)
+            refit = cand.fit(TrainingSet(data, current, others))
+            if hasattr(cand, "refine"):
+                better = cand.refine(refit, TrainingSet(data, current, others))
+                if better is not None and _train_mse(data, better) <= _train_mse(data, refit):
+                    refit = better
+            mse = _train_mse(data, refit)
+            if mse < best_mse * (1.0 - 1e-4):
+                best_mse, current, moved = mse, refit, True
+                cause.fitted = refit
+                cause.parameters = dict(refit.parameters)
+        if not moved:
+            break
+    return current
+
+
 def select_causes(data: SelectionData, baseline, candidates: Sequence, alpha: float = ALPHA,
                   min_gain_frac: float = MIN_GAIN_FRAC, lookalike_alpha: float = LOOKALIKE_ALPHA,
                   max_causes: int = MAX_CAUSES, intervals: bool = True, max_order: int = DEFAULT_MAX_ORDER,
@@ -237,7 +270,10 @@ def select_causes(data: SelectionData, baseline, candidates: Sequence, alpha: fl
         steps.append(SelectionStep(scores, best.id, look))
         named.append(Cause(best.id, best.fitted, dict(best.fitted.parameters), {}, best.comparison))
         current = best.fitted
-        resid_cur = resid_best
+        if len(named) >= 2:
+            say("refitting the named causes together")
+            current = _backfit(data, named, {c.id: c for c in candidates}, current)
+        resid_cur = _resid(data, current)
         remaining = [c for c in remaining if c.id != best.id]
 
     say("structure test of what remains")
