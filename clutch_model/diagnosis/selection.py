@@ -182,35 +182,37 @@ def _remainder_test(data, resid, alpha, min_gain_frac, max_order):
     return res
 
 
-BACKFIT_PASSES = 3
+BACKFIT_PASSES = 8
+BACKFIT_TOL = 1e-3      # a pass that lowers the training MSE by less than this fraction ends it
 
 
 def _backfit(data: SelectionData, named: list, cand_by_id: dict, current):
-    """Once a second cause is named, the earlier ones are refitted on top of the others
-    (backfitting: each cause's own parameters with every other cause in the model, a few
-    passes, a refit kept when it lowers the training error). An earlier cause was fitted while
-    the later one was missing, and a cause that resembles the missing one absorbs part of it
-    (a spring preload fitted alone takes part of a torque offset: 246 N instead of 418 N).
-    The causes' fitted objects and parameters are updated; -> the model with every cause."""
+    """Once a second cause is named, every named cause is refitted on top of the others
+    (backfitting: each cause's own parameters with every other cause in the model, passes
+    until the training error stops falling by BACKFIT_TOL; a refit is kept when it lowers the
+    training error). An earlier cause was fitted while the later one was missing, and a cause
+    that resembles the missing one absorbs part of it (a spring preload fitted alone takes part
+    of a torque offset: 246 N instead of 418 N). The causes' fitted objects and parameters are
+    updated; -> the model with every cause."""
     best_mse = _train_mse(data, current)
     for _ in range(BACKFIT_PASSES):
-        moved = False
-        for k, cause in enumerate(named):
+        start_mse = best_mse
+        for cause in named:
             cand = cand_by_id.get(cause.id)
             if cand is None:
                 continue
-            others = tuple(c.id for c in named if c.id != cause.id)
-            refit = cand.fit(TrainingSet(data, current, others))
+            train = TrainingSet(data, current, tuple(c.id for c in named if c.id != cause.id))
+            refit = cand.fit(train)
             if hasattr(cand, "refine"):
-                better = cand.refine(refit, TrainingSet(data, current, others))
+                better = cand.refine(refit, train)
                 if better is not None and _train_mse(data, better) <= _train_mse(data, refit):
                     refit = better
             mse = _train_mse(data, refit)
-            if mse < best_mse * (1.0 - 1e-4):
-                best_mse, current, moved = mse, refit, True
+            if mse < best_mse:
+                best_mse, current = mse, refit
                 cause.fitted = refit
                 cause.parameters = dict(refit.parameters)
-        if not moved:
+        if best_mse > start_mse * (1.0 - BACKFIT_TOL):
             break
     return current
 
