@@ -99,6 +99,14 @@ def _check(tmp_path, condition, case, seed):
 # Known misses of the diagnosis (statistics of the held-out tests, not the harness): run with
 # `-m slow`, kept out of CI until fixed.
 KNOWN_MISSES = {
+    # the torque at 50 Hz: the measured-time campaign simulates the model on the torque stamps
+    # only (20 ms steps, inputs held between rows), which leaves a dynamics misfit (calibrated
+    # held-out RMSE 9.9 N*m; 8.4 with the same drive and the torque at 200 Hz) that the
+    # flexible model predicts (library columns: low-passed force / torque minus themselves,
+    # plain held-out RMSE 9.9 -> 8.2, t = 5.1 on 13 dof) -> unexplained. It read `none` only
+    # while the held-out test had 7 dof; the fix belongs to the simulation grid (engine /
+    # measured_time: simulate finely, compare at the stamps), not to the statistics
+    ("unaligned", "none", 31): "known miss: 50 Hz stamps simulated on a 20 ms grid leave a dynamics misfit",
     # fixed (docs/diagnosis_statistics.md): ("lowpass", "none", 33) was read as structure at
     # t = 14.6 (the library columns carried the measured inputs' sensor noise, and materiality was
     # in units of the innovation variance, 3 % of the noise variance under a 10 Hz band limit);
