@@ -4,7 +4,8 @@ Candidates are objects (catalog mechanisms, and later terms discovered from the 
 method, ``fit(train) -> fitted`` (and optionally ``refine(fitted, train) -> fitted``, a costlier
 refit tried on the few candidates that fit the training rows best); a fitted candidate has ``parameters`` and
 ``predict(data) -> predicted measured series on all rows`` (the model so far *with* the
-candidate added). Optionally ``sensitivity()`` (ParameterSensitivity) gives the Jacobian of
+candidate added). Fitting a candidate whose id is already in the model so far replaces it
+(backfitting refits a named cause with the others in the model). Optionally ``sensitivity()`` (ParameterSensitivity) gives the Jacobian of
 the prediction for parameter intervals; without it, intervals come from a delete-a-group
 jackknife over runs or blocks (one refit per group).
 
@@ -184,6 +185,7 @@ def _remainder_test(data, resid, alpha, min_gain_frac, max_order):
 
 BACKFIT_PASSES = 8
 BACKFIT_TOL = 1e-3      # a pass that lowers the training MSE by less than this fraction ends it
+BACKFIT_MIN_CUT = 1e-6  # a refit is kept when it lowers the training MSE by more than this fraction
 
 
 def _backfit(data: SelectionData, named: list, cand_by_id: dict, current):
@@ -208,7 +210,7 @@ def _backfit(data: SelectionData, named: list, cand_by_id: dict, current):
                 if better is not None and _train_mse(data, better) <= _train_mse(data, refit):
                     refit = better
             mse = _train_mse(data, refit)
-            if mse < best_mse:
+            if mse < best_mse * (1.0 - BACKFIT_MIN_CUT):      # not a reshuffle within rounding
                 best_mse, current = mse, refit
                 cause.fitted = refit
                 cause.parameters = dict(refit.parameters)

@@ -58,6 +58,21 @@ SLOW = [
     ("car", "torque_sensor_lowpass", 51),
     ("long_drive", "none", 52),
 ]
+# Measured on the slow set (2026-11-24, diag-stats; 8 of 12 pass). Misses, with the reason:
+SLOW_MEASURED_MISSES = {
+    # unaligned topics with the torque at 50 Hz (see KNOWN_MISSES' unaligned/none): the model
+    # simulated on 20 ms steps leaves a misfit the inputs predict (structure t = 4.5)
+    ("car", "none", 44): "unexplained: simulation-grid misfit at 50 Hz torque stamps",
+    # a 150 ms delay (+ drag 2.2 N*m/(rad/s)) read as a 107 ms transport_delay plus a 43 ms
+    # actuator_lag (t = 20.8, 6.3) plus drag_torque 1.9: a delay approximated by delay + lag
+    ("lockup", "transport_delay+drag_torque", 47): "wrong: actuator_lag named as a third cause",
+    # a friction level drawn per run: nothing in the inputs predicts it, and one 8 s held-out
+    # run gives the held-out-excess test (Welch t over stretches) a single stretch -> none
+    ("lab", "run_friction_level", 49): "missed: none (held-out excess needs >= 2 held-out stretches)",
+    # torque-sensor low-pass under car conditions: torque_sensor_lag and actuator_lag cannot be
+    # told apart on the held-out rows -> unexplained (right on ar1 / unaligned alone)
+    ("car", "torque_sensor_lowpass", 51): "unexplained: torque_sensor_lag vs actuator_lag lookalike",
+}
 
 
 def _check(tmp_path, condition, case, seed):

@@ -60,7 +60,8 @@ class LinearCandidate:
         data = train.data
         base = train.base
         if isinstance(base, LinearFit):
-            root, cols, names = base.root, base.columns, list(base.names)
+            keep = [j for j, n in enumerate(base.names) if n != self.id]    # refitting replaces
+            root, cols, names = base.root, base.columns[:, keep], [base.names[j] for j in keep]
         else:
             root, cols, names = base, np.zeros((data.y.size, 0)), []
         cols = np.column_stack([cols, self.column])
