@@ -12,7 +12,8 @@ the calibrated one.
 
 The fast set (9 campaigns + harness checks) took 4.5 min with the diagnosis of main and 6 min
 with the statistics rewrite in progress, on this 2-core machine under a load average of 7-8
-(15-20 s CPU per diagnose); heavier samples are marked slow.
+(15-20 s CPU per diagnose); 13.5 min with the issue-9 fixes under a load average of 10-15;
+heavier samples are marked slow.
 CLUTCH_HIDDEN_SEED=<int> draws other magnitudes. bench/bench_diagnose_matrix.py runs the whole
 matrix (every mechanism, pairs, lookalikes x every condition x seeds).
 """
