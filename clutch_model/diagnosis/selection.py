@@ -4,7 +4,8 @@ Candidates are objects (catalog mechanisms, and later terms discovered from the 
 method, ``fit(train) -> fitted`` (and optionally ``refine(fitted, train) -> fitted``, a costlier
 refit tried on the few candidates that fit the training rows best); a fitted candidate has ``parameters`` and
 ``predict(data) -> predicted measured series on all rows`` (the model so far *with* the
-candidate added). Optionally ``sensitivity()`` (ParameterSensitivity) gives the Jacobian of
+candidate added). Fitting a candidate whose id is already in the model so far replaces it
+(backfitting refits a named cause with the others in the model). Optionally ``sensitivity()`` (ParameterSensitivity) gives the Jacobian of
 the prediction for parameter intervals; without it, intervals come from a delete-a-group
 jackknife over runs or blocks (one refit per group).
 
@@ -182,6 +183,42 @@ def _remainder_test(data, resid, alpha, min_gain_frac, max_order):
     return res
 
 
+BACKFIT_PASSES = 8
+BACKFIT_TOL = 1e-3      # a pass that lowers the training MSE by less than this fraction ends it
+BACKFIT_MIN_CUT = 1e-6  # a refit is kept when it lowers the training MSE by more than this fraction
+
+
+def _backfit(data: SelectionData, named: list, cand_by_id: dict, current):
+    """Once a second cause is named, every named cause is refitted on top of the others
+    (backfitting: each cause's own parameters with every other cause in the model, passes
+    until the training error stops falling by BACKFIT_TOL; a refit is kept when it lowers the
+    training error). An earlier cause was fitted while the later one was missing, and a cause
+    that resembles the missing one absorbs part of it (a spring preload fitted alone takes part
+    of a torque offset: 246 N instead of 418 N). The causes' fitted objects and parameters are
+    updated; -> the model with every cause."""
+    best_mse = _train_mse(data, current)
+    for _ in range(BACKFIT_PASSES):
+        start_mse = best_mse
+        for cause in named:
+            cand = cand_by_id.get(cause.id)
+            if cand is None:
+                continue
+            train = TrainingSet(data, current, tuple(c.id for c in named if c.id != cause.id))
+            refit = cand.fit(train)
+            if hasattr(cand, "refine"):
+                better = cand.refine(refit, train)
+                if better is not None and _train_mse(data, better) <= _train_mse(data, refit):
+                    refit = better
+            mse = _train_mse(data, refit)
+            if mse < best_mse * (1.0 - BACKFIT_MIN_CUT):      # not a reshuffle within rounding
+                best_mse, current = mse, refit
+                cause.fitted = refit
+                cause.parameters = dict(refit.parameters)
+        if best_mse > start_mse * (1.0 - BACKFIT_TOL):
+            break
+    return current
+
+
 def select_causes(data: SelectionData, baseline, candidates: Sequence, alpha: float = ALPHA,
                   min_gain_frac: float = MIN_GAIN_FRAC, lookalike_alpha: float = LOOKALIKE_ALPHA,
                   max_causes: int = MAX_CAUSES, intervals: bool = True, max_order: int = DEFAULT_MAX_ORDER,
@@ -237,7 +274,10 @@ def select_causes(data: SelectionData, baseline, candidates: Sequence, alpha: fl
         steps.append(SelectionStep(scores, best.id, look))
         named.append(Cause(best.id, best.fitted, dict(best.fitted.parameters), {}, best.comparison))
         current = best.fitted
-        resid_cur = resid_best
+        if len(named) >= 2:
+            say("refitting the named causes together")
+            current = _backfit(data, named, {c.id: c for c in candidates}, current)
+        resid_cur = _resid(data, current)
         remaining = [c for c in remaining if c.id != best.id]
 
     say("structure test of what remains")

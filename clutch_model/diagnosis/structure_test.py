@@ -31,12 +31,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy import stats
-from scipy.signal import lfilter
+from scipy.signal import butter, filtfilt, lfilter
 
 from clutch_model.diagnosis.noise_model import DEFAULT_MAX_ORDER, NoiseModel, fit_noise_model, segments_of
 
 BLOCK_S = 1.0
 MIN_BLOCK_ROWS = 20
+CROSS_FIT_GUARD_S = 0.25   # per-run cross-fitting: rows this close to a predicted block are not fitted
+MIN_BLOCK_S = 0.25    # shortest block of the robust variance (blocks are chosen from the data)
 ALPHA = 1e-3            # one-sided level of a single held-out test
 MIN_GAIN_FRAC = 0.005   # materiality: the alternative must cut the held-out innovation variance by 0.5 %
 
@@ -56,12 +58,31 @@ class PredictiveComparison:
     noise_null: NoiseModel | None = field(default=None, repr=False)
     noise_alt: NoiseModel | None = field(default=None, repr=False)
     block_gain: np.ndarray | None = field(default=None, repr=False)   # per-block delta_ll
+    innovation_mse_null: float = math.nan   # held-out one-step error MSE, N*m^2
+    innovation_mse_alt: float = math.nan
+    block_rows: int = 0                     # rows per block of the robust variance (0: BLOCK_S windows)
+
+    @property
+    def plain_gain_frac(self) -> float:
+        """1 - plain held-out MSE (alt) / plain held-out MSE (null): the cut in the torque's own
+        units (N*m^2), which is what a report's gain shows."""
+        if not (self.rmse_null > 0):
+            return 0.0
+        return 1.0 - (self.rmse_alt / self.rmse_null) ** 2
 
     def significant(self, alpha: float = ALPHA, min_gain_frac: float = MIN_GAIN_FRAC,
-                    plain_gain: bool = False) -> bool:
-        """plain_gain: also require the plain held-out RMSE to fall (the gain a report shows)."""
-        return bool(self.p_value < alpha and self.gain_frac > min_gain_frac and self.delta_ll > 0
-                    and (not plain_gain or self.rmse_alt < self.rmse_null))
+                    plain_gain: bool = False, noise_units: bool = False) -> bool:
+        """plain_gain: also require the plain held-out RMSE to fall (the gain a report shows).
+        noise_units: materiality also in the torque's own units: the plain held-out mean square
+        must fall by min_gain_frac too (structure claimed for the remainder). In units of the
+        innovation variance alone, under band-limited noise (innovation variance ~3 % of the
+        noise variance) a broadband misfit of a few tenths of a N*m would be material."""
+        ok = self.p_value < alpha and self.gain_frac > min_gain_frac and self.delta_ll > 0
+        if plain_gain:
+            ok = ok and self.rmse_alt < self.rmse_null
+        if noise_units:
+            ok = ok and self.plain_gain_frac > min_gain_frac
+        return bool(ok)
 
     @property
     def z(self) -> float:
@@ -122,6 +143,40 @@ def block_labels(t: np.ndarray, mask: np.ndarray, run_start: np.ndarray, block_s
     return lab
 
 
+def score_block_s(u: np.ndarray, rows: np.ndarray, run_start: np.ndarray, t: np.ndarray,
+                  max_block_s: float = BLOCK_S, min_block_s: float = MIN_BLOCK_S) -> tuple:
+    """Block length (s) for the block-sum variance of a score series u over ``rows``: twice the
+    lag after which u's autocorrelation is negligible (Politis' empirical rule for the
+    bandwidth of a flat-top lag window: the smallest m with |acf(m + k)| < 2 sqrt(log10 n / n)
+    for k = 1..K, K = max(5, sqrt(log10 n))), pooled over the contiguous stretches of rows;
+    within [max(min_block_s, MIN_BLOCK_ROWS rows), max_block_s]. -> (block_s, rows per block)."""
+    segs = [(a, b) for a, b in segments_of(np.where(rows, u, np.nan), run_start) if b - a > 2]
+    dt = float(np.median(np.concatenate([np.diff(t[a:b]) for a, b in segs]))) if segs else 0.0
+    if not segs or not dt > 0:
+        return max_block_s, 0
+    n = sum(b - a for a, b in segs)
+    max_lag = int(min(max_block_s / dt, max(b - a for a, b in segs) - 1))
+    num = np.zeros(max_lag + 1)
+    den = 0.0
+    for a, b in segs:
+        x = u[a:b] - np.mean(u[a:b])
+        den += float(x @ x)
+        for k in range(min(max_lag, b - a - 1) + 1):
+            num[k] += float(x[k:] @ x[:x.size - k])
+    if den <= 0:
+        return max_block_s, 0
+    acf = num / den
+    K = max(5, int(math.ceil(math.sqrt(math.log10(max(n, 10))))))
+    bound = 2.0 * math.sqrt(math.log10(max(n, 10)) / n)
+    m = max_lag
+    for j in range(max_lag - K + 1):
+        if np.all(np.abs(acf[j + 1:j + 1 + K]) < bound):
+            m = j
+            break
+    block_s = min(max(2 * m * dt, min_block_s, MIN_BLOCK_ROWS * dt), max_block_s)
+    return block_s, int(round(block_s / dt))
+
+
 def _own_noise(resid, train_mask, run_start, max_order):
     ok = train_mask & np.isfinite(resid)
     return fit_noise_model(resid, run_start, ok, max_order=max_order)
@@ -151,11 +206,6 @@ def compare_residuals(resid_null: np.ndarray, resid_alt: np.ndarray, train_mask:
     lla = -0.5 * (np.log(va) + ea * ea / va)
     rows = test_mask & both
     d = np.where(rows, lla - lln, 0.0)
-    lab = block_labels(t, rows, run_start, block_s)
-    nb = int(lab.max()) + 1 if (lab >= 0).any() else 0
-    sums = np.bincount(lab[lab >= 0], weights=d[lab >= 0], minlength=nb) if nb else np.zeros(0)
-    n_rows = int(rows.sum())
-    delta = float(sums.sum())
     # matched-filter statistic of the improvement g = e_null - e_alt of the one-step errors
     # (both scaled by the null's predicted sd): S = sum e_null g = sum e_alt g + sum g^2. Its
     # variance comes from the block sums of e_alt g, which have mean zero when the alternative
@@ -165,6 +215,15 @@ def compare_residuals(resid_null: np.ndarray, resid_alt: np.ndarray, train_mask:
     zn = np.where(rows, en / sn, 0.0)
     za = np.where(rows, ea / sn, 0.0)
     g = zn - za
+    # blocks as long as the scores' own correlation needs (at most block_s): one-step errors
+    # are nearly uncorrelated, so fixed 1 s blocks threw away degrees of freedom on a short
+    # held-out set (8 s held out: 7 dof, t > 4.8 needed at 1e-3 instead of 3.4 at 31 dof)
+    blk_s, block_rows = score_block_s(za * g, rows, run_start, t, block_s)
+    lab = block_labels(t, rows, run_start, blk_s)
+    nb = int(lab.max()) + 1 if (lab >= 0).any() else 0
+    sums = np.bincount(lab[lab >= 0], weights=d[lab >= 0], minlength=nb) if nb else np.zeros(0)
+    n_rows = int(rows.sum())
+    delta = float(sums.sum())
     good = lab >= 0
     S = np.bincount(lab[good], weights=(zn * g)[good], minlength=nb) if nb else np.zeros(0)
     U = np.bincount(lab[good], weights=(za * g)[good], minlength=nb) if nb else np.zeros(0)
@@ -183,7 +242,8 @@ def compare_residuals(resid_null: np.ndarray, resid_alt: np.ndarray, train_mask:
     rmse_a = float(np.sqrt(np.mean(ra[rows] ** 2))) if n_rows else math.nan
     return PredictiveComparison(delta_ll=delta, t_stat=float(tstat), p_value=p, n_blocks=nb, n_rows=n_rows,
                                 gain_frac=gain, rmse_null=rmse_n, rmse_alt=rmse_a, noise_null=nm_null,
-                                noise_alt=nm_alt, block_gain=sums)
+                                noise_alt=nm_alt, block_gain=sums, innovation_mse_null=mse_n,
+                                innovation_mse_alt=mse_a, block_rows=block_rows)
 
 
 def candidate_test(residual: np.ndarray, correction: np.ndarray, train_mask, test_mask, run_start, t,
@@ -336,6 +396,39 @@ def gls_fit(residual: np.ndarray, X: np.ndarray, train_mask: np.ndarray, run_sta
     return beta, nm
 
 
+INPUT_BAND_HZ = 10.0    # library columns are zero-phase low-passed here (the inputs' sensor noise is not an input)
+
+
+def input_band(X: np.ndarray, t: np.ndarray, run_start: np.ndarray, band_hz: float = INPUT_BAND_HZ) -> np.ndarray:
+    """The library columns without the measured inputs' sensor noise: each run's columns
+    through a zero-phase 2nd-order Butterworth low-pass at band_hz (left as they are where the
+    sample rate is below 2.5 band_hz or a column is not finite).
+
+    Why: the predicted torque is computed from the *measured* force and slip, so the residual
+    carries the model's response to their sensor noise (white, a few tenths of a N*m), and so do
+    columns built from them (``torque low-pass - torque`` is that noise, high-passed). A
+    regression on such columns predicts the held-out residual's input-noise part, which is
+    noise, not a mechanism; under band-limited torque noise (whitened, the band above the sensor's
+    cut-off dominates the test) it read as structure at t = 15. Controller force profiles,
+    slip changes and engagement transients live below band_hz; white input noise keeps
+    ~band_hz / (rate / 2) of its variance."""
+    X = np.asarray(X, float)
+    out = X.copy()
+    t = np.asarray(t, float)
+    for a, b in segments_of(np.zeros(X.shape[0]), run_start):
+        if b - a < 16:
+            continue
+        dt = float(np.median(np.diff(t[a:b])))
+        if not dt > 0 or 1.0 / dt < 2.5 * band_hz:
+            continue
+        bb, aa = butter(2, band_hz * 2.0 * dt)
+        seg = X[a:b]
+        fin = np.all(np.isfinite(seg), axis=0)
+        if fin.any():
+            out[a:b, fin] = filtfilt(bb, aa, seg[:, fin], axis=0, padlen=min(3 * (max(len(aa), len(bb)) - 1) * 4, b - a - 1))
+    return out
+
+
 def structure_test(residual: np.ndarray, X: np.ndarray, train_mask, test_mask, run_start, t,
                    feature_names=None, alpha: float = ALPHA, min_gain_frac: float = MIN_GAIN_FRAC,
                    block_s: float = BLOCK_S, max_order: int = DEFAULT_MAX_ORDER) -> StructureResult:
@@ -343,6 +436,7 @@ def structure_test(residual: np.ndarray, X: np.ndarray, train_mask, test_mask, r
     library X (columns = input signals, see input_features), fitted on the training rows, must
     beat the noise model on the held-out rows (compare_residuals)."""
     residual = np.asarray(residual, float)
+    X = input_band(X, t, run_start)
     # two fits, each tested at alpha / 2: plain least squares (a structure whose level a noise
     # model fitted to the residual would absorb) and feasible GLS (efficient under coloured
     # noise, e.g. a drift)
@@ -354,7 +448,7 @@ def structure_test(residual: np.ndarray, X: np.ndarray, train_mask, test_mask, r
             beta, pred, _ = fit_flexible(residual, X, train_mask, run_start, max_order=max_order)
         cmp = candidate_test(residual, pred, train_mask, test_mask, run_start, t, block_s=block_s,
                              max_order=max_order)
-        res = StructureResult(structured=cmp.significant(alpha / 2, min_gain_frac), comparison=cmp,
+        res = StructureResult(structured=cmp.significant(alpha / 2, min_gain_frac, noise_units=True), comparison=cmp,
                               coefficients=beta, feature_names=list(feature_names or []), prediction=pred)
         if best is None or (res.structured, cmp.t_stat) > (best.structured, best.comparison.t_stat):
             best = res
@@ -410,7 +504,7 @@ def input_features(signals: dict, t: np.ndarray, run_start: np.ndarray, torque: 
     return names, np.column_stack(cols)
 
 
-def _cross_fit_per_run(r, Xs, rows_all, lab, run_id, run_start, nm):
+def _cross_fit_per_run(r, Xs, rows_all, lab, run_id, run_start, nm, t):
     """Each block of each run predicted from a GLS fit of Xs on the run's other blocks."""
     corr = np.zeros(r.size)
     p = nm.order
@@ -420,13 +514,20 @@ def _cross_fit_per_run(r, Xs, rows_all, lab, run_id, run_start, nm):
         ew = nm.innovations(np.where(rows_j, r, np.nan), run_start)[0]
         Xw = _whiten_columns(nm, Xs, segs)
         blocks_j = np.unique(lab[rows_j])
+        tj = t[rows_j]
+        dt = float(np.median(np.diff(tj))) if tj.size > 2 else 1.0
         if blocks_j.size < 3:
             continue
         for b in blocks_j:
             inb = rows_j & (lab == b)
             idx = np.flatnonzero(inb)
+            # rows whose AR history reaches into block b, and a guard of CROSS_FIT_GUARD_S on
+            # either side: the AR whitens band-limited or held noise only approximately, and
+            # noise correlated across the block's edge would let the fit learn block b's noise
             reach = np.zeros(r.size, bool)
-            reach[idx[-1] + 1:min(idx[-1] + 1 + p, r.size)] = True   # history inside block b
+            gap = max(p, int(round(CROSS_FIT_GUARD_S / dt)))
+            reach[max(idx[0] - gap, 0):idx[0]] = True
+            reach[idx[-1] + 1:min(idx[-1] + 1 + gap, r.size)] = True
             fit = rows_j & ~inb & ~reach & np.isfinite(ew)
             A = Xw[fit]
             lam = 1e-6 * float(np.trace(A.T @ A)) / max(A.shape[1], 1) + 1e-12
@@ -445,7 +546,7 @@ def per_run_structure_test(residual: np.ndarray, X: np.ndarray, train_mask, test
     the predicted block are left out of its fit), and the correction is then tested like any
     candidate against the noise model fitted on the training rows."""
     r = np.asarray(residual, float)
-    X = np.asarray(X, float)
+    X = input_band(X, t, run_start)
     ok_train = train_mask & np.isfinite(r)
     # every run is cross-fitted (the training runs too, so the noise model is fitted to what
     # the per-run model leaves there), twice: the second pass whitens with that noise model
@@ -457,10 +558,11 @@ def per_run_structure_test(residual: np.ndarray, X: np.ndarray, train_mask, test
     nm = fit_noise_model(r, run_start, ok_train, max_order=max_order)
     corr = np.zeros(r.size)
     for _ in range(2):
-        corr = _cross_fit_per_run(r, Xs, rows_all, lab, run_id, run_start, nm)
+        corr = _cross_fit_per_run(r, Xs, rows_all, lab, run_id, run_start, nm, t)
         nm = fit_noise_model(r - corr, run_start, ok_train, max_order=max_order)
     cmp = candidate_test(r, corr, train_mask, test_mask, run_start, t, block_s=block_s, max_order=max_order)
-    return StructureResult(structured=cmp.significant(alpha, min_gain_frac), comparison=cmp, coefficients=None,
+    return StructureResult(structured=cmp.significant(alpha, min_gain_frac, noise_units=True), comparison=cmp,
+                           coefficients=None,
                            feature_names=list(feature_names or []), prediction=corr)
 
 

@@ -12,7 +12,8 @@ the calibrated one.
 
 The fast set (9 campaigns + harness checks) took 4.5 min with the diagnosis of main and 6 min
 with the statistics rewrite in progress, on this 2-core machine under a load average of 7-8
-(15-20 s CPU per diagnose); heavier samples are marked slow.
+(15-20 s CPU per diagnose); 13.5 min with the issue-9 fixes under a load average of 10-15;
+heavier samples are marked slow.
 CLUTCH_HIDDEN_SEED=<int> draws other magnitudes. bench/bench_diagnose_matrix.py runs the whole
 matrix (every mechanism, pairs, lookalikes x every condition x seeds).
 """
@@ -58,6 +59,21 @@ SLOW = [
     ("car", "torque_sensor_lowpass", 51),
     ("long_drive", "none", 52),
 ]
+# Measured on the slow set (2026-11-24, diag-stats; 8 of 12 pass). Misses, with the reason:
+SLOW_MEASURED_MISSES = {
+    # unaligned topics with the torque at 50 Hz (see KNOWN_MISSES' unaligned/none): the model
+    # simulated on 20 ms steps leaves a misfit the inputs predict (structure t = 4.5)
+    ("car", "none", 44): "unexplained: simulation-grid misfit at 50 Hz torque stamps",
+    # a 150 ms delay (+ drag 2.2 N*m/(rad/s)) read as a 107 ms transport_delay plus a 43 ms
+    # actuator_lag (t = 20.8, 6.3) plus drag_torque 1.9: a delay approximated by delay + lag
+    ("lockup", "transport_delay+drag_torque", 47): "wrong: actuator_lag named as a third cause",
+    # a friction level drawn per run: nothing in the inputs predicts it, and one 8 s held-out
+    # run gives the held-out-excess test (Welch t over stretches) a single stretch -> none
+    ("lab", "run_friction_level", 49): "missed: none (held-out excess needs >= 2 held-out stretches)",
+    # torque-sensor low-pass under car conditions: torque_sensor_lag and actuator_lag cannot be
+    # told apart on the held-out rows -> unexplained (right on ar1 / unaligned alone)
+    ("car", "torque_sensor_lowpass", 51): "unexplained: torque_sensor_lag vs actuator_lag lookalike",
+}
 
 
 def _check(tmp_path, condition, case, seed):
@@ -99,12 +115,22 @@ def _check(tmp_path, condition, case, seed):
 # Known misses of the diagnosis (statistics of the held-out tests, not the harness): run with
 # `-m slow`, kept out of CI until fixed.
 KNOWN_MISSES = {
-    # 10 Hz band-limited torque noise: the flexible residual model "predicts" it on held-out
-    # rows (structure t = 14.6 against an AR(8) noise model) -> unexplained instead of none
-    ("lowpass", "none", 33): "known miss: band-limited noise read as structure (unexplained)",
-    # spring_preload 418 N + torque_offset 39 N*m: spring_preload cuts the held-out RMSE
-    # 28.7 -> 20.0 N*m but its block-robust t = 4.3 does not reach alpha = 1e-3 -> none
-    ("lab", "spring_preload+torque_offset", 37): "known miss: two causes at once read as none",
+    # the torque at 50 Hz: the measured-time campaign simulates the model on the torque stamps
+    # only (20 ms steps, inputs held between rows), so the model is late: a lag fitted to the
+    # residual (residual ~ lag x d(predicted)/dt) is 7.9 ms (half a 50 Hz period is 10 ms) and
+    # predicts the held-out residual (t = 4.3, RMSE 9.9 -> 9.0 N*m); the same drive with the
+    # torque at 200 Hz reads `none` (calibrated held-out RMSE 8.4). The flexible model finds
+    # it (plain held-out RMSE 9.9 -> 8.2, t = 5.1 on 13 dof) -> unexplained. It read `none` only
+    # while the held-out test had 7 dof; the fix belongs to the simulation grid (engine /
+    # measured_time: first-order hold or a fine grid, compared at the stamps), not to the
+    # statistics. The same zero-order hold at 200 Hz (2.5 ms) shows on some lab-clock
+    # campaigns: matrix none@drift#1, fitted lag 2.46 ms, t = 14
+    ("unaligned", "none", 31): "known miss: 50 Hz stamps simulated on a 20 ms grid leave a dynamics misfit",
+    # fixed (docs/diagnosis_statistics.md): ("lowpass", "none", 33) was read as structure at
+    # t = 14.6 (the library columns carried the measured inputs' sensor noise, and materiality was
+    # in units of the innovation variance, 3 % of the noise variance under a 10 Hz band limit);
+    # ("lab", "spring_preload+torque_offset", 37) had t = 4.3 on 7 degrees of freedom (1 s blocks
+    # of an 8 s held-out run) and a preload that had absorbed part of the offset (no backfit)
 }
 
 
