@@ -32,6 +32,7 @@ from clutch_model.diagnosis.measured_time import measured_time_campaign, topics_
 from clutch_model.plant.simulate import SimResult
 from clutch_model.diagnosis import features as F
 from clutch_model.diagnosis.candidates import CampaignContext, MechanismCandidate, baseline_fit
+from clutch_model.diagnosis.input_hold import with_midpoint_force
 from clutch_model.diagnosis.fitting import CANDIDATE_IDS, CandidateFit, fit_candidate
 from clutch_model.diagnosis.noise_model import fit_noise_model
 from clutch_model.diagnosis.selection import Selection, SelectionData, select_causes
@@ -247,6 +248,9 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
         # compare where the measurement is: rows at the torque's own stamps, inputs
         # interpolated between their samples (diagnosis.measured_time)
         campaign = measured_time_campaign(campaign, rate_hz=MEASURED_TIME_GRID_HZ)
+        # rows at the torque's stamps are far apart (20 ms at 50 Hz) and the plant holds each
+        # row's inputs over its step: give it the force of the step's midpoint (input_hold)
+        campaign = with_midpoint_force(campaign)
     campaign = smooth_sump(campaign)
     # lock-up phases (found from the slip data, diagnosis.lockup): the driveline sets the torque
     campaign, locked = without_locked_rows(campaign)

@@ -13,6 +13,8 @@ import math
 
 import numpy as np
 
+NONFINITE_RESIDUAL = 1e3   # residual (in units of the noise scale) of a non-finite prediction
+
 
 class TorqueLeastSquares:
     def __init__(self, predict, measured, mask, scale: float = 1.0, ridge: float = 0.0,
@@ -42,7 +44,10 @@ class TorqueLeastSquares:
 
     def data_residuals(self, preds) -> np.ndarray:
         """(predicted - measured)[mask] / scale of prediction rows (n_sets, n)."""
-        return (preds[:, self.mask] - self.measured[self.mask][None, :]) / self.scale
+        r = (preds[:, self.mask] - self.measured[self.mask][None, :]) / self.scale
+        # a parameter set whose simulation runs away (e.g. a friction term feeding its own
+        # heat) predicts non-finite torque: a large finite misfit lets the solver step back
+        return np.where(np.isfinite(r), r, NONFINITE_RESIDUAL)
 
     def residuals(self, x) -> np.ndarray:
         x = np.asarray(x, dtype=float)

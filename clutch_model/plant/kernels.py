@@ -98,8 +98,12 @@ def derived_constants(p):
 
 @njit(cache=True)
 def viscosity(theta, p):
-    """ATF dynamic viscosity [Pa s], eq. 3.17, theta clamped at >= 1 C."""
+    """ATF dynamic viscosity [Pa s], eq. 3.17, theta clamped to [1, 1e6] C (the upper bound
+    is far outside any clutch; it only keeps a runaway parameter set's viscosity above 0, so
+    the film equation never divides by zero)."""
     th = theta if theta > 1.0 else 1.0
+    if th > 1e6:
+        th = 1e6
     return p[P.ALPHA0] * th ** (-p[P.ALPHA1])
 
 
