@@ -44,6 +44,8 @@ PASSBAND = 0.8                # resample_poly's Kaiser FIR is flat to ~0.8 of th
 CORNER_MARGIN = 1.5           # the fastest lag's corner sits this far inside the passband
 SIGNAL_POWER = 0.999          # power fraction of force and slip that must stay in the passband
 MIN_DECIMATION = 2            # below this factor the campaign is left as it is
+ERROR_FRAC = 0.1              # the decimated plant within 0.1 noise sd of the native one (1 % of the variance)
+SAMPLE_S = 300.0              # data the error check simulates (the first part of each run)
 
 
 @dataclass(frozen=True)
@@ -52,6 +54,7 @@ class DecimationPlan:
     factor: int                    # q: keep every q-th (filtered) row; 1 = no decimation
     min_rate_hz: float             # the lowest rate the rules above allow
     reasons: dict                  # rule -> rate it asks for (Hz)
+    checked: dict = None           # factor -> (decimation error RMS, noise sd at that rate), N*m
 
     @property
     def rate_hz(self) -> float:
@@ -62,12 +65,20 @@ class DecimationPlan:
             return (f"rows at {self.native_rate_hz:.0f} Hz diagnosed as they are (the diagnosis needs "
                     f">= {self.min_rate_hz:.0f} Hz)")
         why = ", ".join(f"{k} {v:.0f} Hz" for k, v in self.reasons.items())
+        chk = ""
+        if self.checked and self.factor in self.checked:
+            e, sd = self.checked[self.factor]
+            chk = f"; the plant on the decimated rows is within {e:.2f} N*m RMS of the native one, noise sd {sd:.2f} N*m"
         return (f"rows at {self.native_rate_hz:.0f} Hz decimated by {self.factor} to {self.rate_hz:.0f} Hz "
-                f"(anti-aliased; the diagnosis needs >= {self.min_rate_hz:.0f} Hz: {why})")
+                f"(anti-aliased; the diagnosis needs >= {self.min_rate_hz:.0f} Hz: {why}{chk})")
 
     def to_json(self) -> dict:
-        return {"native_rate_hz": self.native_rate_hz, "factor": self.factor, "rate_hz": self.rate_hz,
-                "min_rate_hz": self.min_rate_hz, "rules_hz": dict(self.reasons)}
+        out = {"native_rate_hz": self.native_rate_hz, "factor": self.factor, "rate_hz": self.rate_hz,
+               "min_rate_hz": self.min_rate_hz, "rules_hz": dict(self.reasons)}
+        if self.checked:
+            out["error_check_nm"] = {str(q): {"decimation_error_rms": e, "noise_sd": s}
+                                     for q, (e, s) in sorted(self.checked.items())}
+        return out
 
 
 def fastest_time_constant_s() -> float:
@@ -137,9 +148,12 @@ def signal_bandwidth_hz(campaign, rate_hz: float, power: float = SIGNAL_POWER, m
     return out
 
 
-def choose_diagnosis_rate(campaign, measured_time: bool = False, rate_hz: float | None = None) -> DecimationPlan:
+def choose_diagnosis_rate(campaign, measured_time: bool = False, rate_hz: float | None = None,
+                          model=None) -> DecimationPlan:
     """The decimation plan of a campaign (module doc). ``rate_hz``: a requested diagnosis rate
-    instead of the rules (the factor is still an integer: native / q >= rate_hz)."""
+    instead of the rules (the factor is still an integer: native / q >= rate_hz). ``model``
+    (with the rules only): the factor is lowered until the plant on the decimated rows stays
+    within ERROR_FRAC of the noise of the native one (``decimation_error``)."""
     native = native_rate_hz(campaign, measured_time)
     if not math.isfinite(native) or native <= 0:
         return DecimationPlan(native, 1, math.nan, {})
@@ -150,9 +164,61 @@ def choose_diagnosis_rate(campaign, measured_time: bool = False, rate_hz: float 
                "input bandwidth": 2.0 * signal_bandwidth_hz(campaign, native) / PASSBAND}
     need = max(reasons.values()) if rate_hz is None else float(rate_hz)
     q = max(1, int(math.floor(native / need * (1 + 1e-9))))
+    checked = {}
+    if model is not None and rate_hz is None:
+        while q >= MIN_DECIMATION:
+            err, sd = decimation_error(model, campaign, q, measured_time)
+            checked[q] = (err, sd)
+            if not (err > ERROR_FRAC * sd):           # NaN (nothing to check): accepted
+                break
+            q -= 1
     if q < MIN_DECIMATION:
         q = 1
-    return DecimationPlan(float(native), q, float(need), reasons)
+    return DecimationPlan(float(native), q, float(need), reasons, checked or None)
+
+
+def _sample(campaign, measured_time: bool, sample_s: float):
+    """The first ``sample_s`` of data of each run (state exact: each run restarts the plant),
+    fill rows dropped, as a campaign."""
+    from clutch_model.formats.bag_reader import Campaign
+
+    per_run = sample_s / max(len(campaign.runs), 1)
+    runs = []
+    for r in campaign.runs:
+        rows = _rows(r, measured_time)
+        t = r.t[rows]
+        rows = rows[t <= t[0] + max(per_run, 10.0)]
+        pick = lambda a: None if a is None else np.asarray(a)[rows]      # noqa: E731
+        runs.append(replace(r, t=r.t[rows], applied_force_n=pick(r.applied_force_n),
+                            slip_speed_rad_s=pick(r.slip_speed_rad_s), sump_temperature_c=pick(r.sump_temperature_c),
+                            torque_measured_nm=pick(r.torque_measured_nm),
+                            pack_temperature_measured_c=pick(r.pack_temperature_measured_c)))
+    return Campaign(runs)
+
+
+def decimation_error(model, campaign, q: int, measured_time: bool = False, sample_s: float = SAMPLE_S) -> tuple:
+    """(RMS difference between ``model``'s torque simulated on the q-decimated rows and its
+    native simulation filtered the same way, sd of the measured torque's noise at the
+    decimated rate), N*m, on the first ``sample_s`` of the campaign's data outside lock-up.
+    The noise sd: robust first differences (features.noise_sigma) of the decimated measured
+    torque minus the decimated native simulation."""
+    from clutch_model.diagnosis.features import noise_sigma
+    from clutch_model.diagnosis.lockup import without_locked_torque
+    from clutch_model.prediction import predict_campaign
+
+    sample = _sample(campaign, measured_time, sample_s)
+    vec = model.vector()[None, :]
+    native = predict_campaign(vec, sample, measurement=list(model.mechanisms)).torque_nm[0]
+    dec = decimate_campaign(sample, DecimationPlan(0.0, q, 0.0, {}), False)
+    dec_unlocked, _ = without_locked_torque(dec)
+    pred = predict_campaign(vec, dec, measurement=list(model.mechanisms)).torque_nm[0]
+    ref = np.concatenate([_filtered(native[sl], q) for _, sl in sample.slices()])
+    ok = np.isfinite(dec_unlocked.torque_measured)
+    if ok.sum() < 20:
+        return math.nan, math.nan
+    err = float(np.sqrt(np.mean((pred - ref)[ok] ** 2)))
+    sd = noise_sigma(np.where(ok, dec.torque_measured - ref, np.nan), dec.run_start)
+    return err, sd
 
 
 def _filtered(x: np.ndarray, q: int) -> np.ndarray:

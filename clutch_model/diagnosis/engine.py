@@ -257,7 +257,7 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
     # fast logs: anti-aliased decimation to the rate the diagnosis needs (diagnosis.decimation)
     plan = None
     if diagnosis_rate_hz is None or diagnosis_rate_hz > 0:
-        plan = choose_diagnosis_rate(campaign, measured_time, diagnosis_rate_hz)
+        plan = choose_diagnosis_rate(campaign, measured_time, diagnosis_rate_hz, model=nominal)
         campaign = decimate_campaign(campaign, plan, measured_time)
         say(plan.describe())
     timings["prepare (regrid, decimate)"] = time.perf_counter() - tick
