@@ -146,7 +146,16 @@ class FitExecutor:
 
     @staticmethod
     def _phase(train):
-        return (id(train.base), tuple(train.selected), _digest(train.mask))
+        """What identifies a selection step's requests: the model so far (by identity and by
+        value, so a reused id() never matches an old entry), the named causes, the rows."""
+        model = getattr(train.base, "model", None)
+        try:
+            value = hashlib.sha1(np.asarray(model.vector(), float).tobytes()
+                                 + repr([(m.id, sorted(m.values.items())) for m in model.mechanisms]).encode()
+                                 ).hexdigest()
+        except Exception:             # not a ClutchModel: identity only
+            value = ""
+        return (id(train.base), value, tuple(train.selected), _digest(train.mask))
 
     def _remaining(self, train):
         return [c for c in self._group if c.id not in train.selected]
