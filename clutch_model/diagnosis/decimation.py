@@ -16,7 +16,12 @@ The diagnosis rate (``choose_diagnosis_rate``) is the lowest rate that keeps
   (tau_min = 3 ms, corner 1 / (2 pi tau_min) = 53 Hz) inside the filter's flat passband with a
   margin: PASSBAND x rate / 2 >= CORNER_MARGIN x corner;
 * the data's own bandwidth: the frequency below which SIGNAL_POWER of the power of the
-  (detrended) applied force and slip speed lies, inside the passband.
+  (detrended) applied force and slip speed lies, inside the passband — when no model is given;
+  diagnose gives one and checks instead what this rule guards against, on the data: the plant
+  (the nominal model) simulated on the decimated rows must stay within ERROR_FRAC of the
+  decimated torque noise's sd of its native simulation filtered the same way
+  (``decimation_error``, first SAMPLE_S of data); q is lowered until it does. Step-like force
+  requests, whose spectrum never ends, are so decimated as far as the plant's response allows.
 
 The native rate is divided by the largest integer q with native / q >= that rate; q < 2 (every
 campaign at 200-390 Hz, e.g. the virtual test cars) means no decimation at all, so campaigns
@@ -64,7 +69,8 @@ class DecimationPlan:
         if self.factor < 2:
             return (f"rows at {self.native_rate_hz:.0f} Hz diagnosed as they are (the diagnosis needs "
                     f">= {self.min_rate_hz:.0f} Hz)")
-        why = ", ".join(f"{k} {v:.0f} Hz" for k, v in self.reasons.items())
+        why = ", ".join(f"{k} {v:.0f} Hz" + (" (left to the plant check)" if self.checked and k == "input bandwidth"
+                                             else "") for k, v in self.reasons.items())
         chk = ""
         if self.checked and self.factor in self.checked:
             e, sd = self.checked[self.factor]
@@ -163,6 +169,11 @@ def choose_diagnosis_rate(campaign, measured_time: bool = False, rate_hz: float 
                "fastest mechanism": 2.0 * CORNER_MARGIN * corner / PASSBAND,
                "input bandwidth": 2.0 * signal_bandwidth_hz(campaign, native) / PASSBAND}
     need = max(reasons.values()) if rate_hz is None else float(rate_hz)
+    if model is not None and rate_hz is None:
+        # the error check below measures what the bandwidth rule guards against (the plant's
+        # response to the filtered inputs), on the data itself: step-like force requests, whose
+        # spectrum never ends, are then decimated as far as the plant's response allows
+        need = max(v for k, v in reasons.items() if k != "input bandwidth")
     q = max(1, int(math.floor(native / need * (1 + 1e-9))))
     checked = {}
     if model is not None and rate_hz is None:
