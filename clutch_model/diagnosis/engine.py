@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -248,6 +248,7 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
 
     # -- stage 1: split ---------------------------------------------------------------------
     campaign = runs if isinstance(runs, Campaign) else Campaign(list(runs))
+    del runs                      # long logs: the native rows go once regridded / decimated
     if measured_time is None:
         measured_time = topics_unaligned(campaign.runs)
     if measured_time:
@@ -264,6 +265,9 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
     campaign = smooth_sump(campaign)
     # lock-up phases (found from the slip data, diagnosis.lockup): the driveline sets the torque
     campaign, locked = without_locked_rows(campaign)
+    # each topic's raw samples served the regridding and the lock-up detection; nothing after
+    # reads them (an hour at 1 kHz: ~0.5 GB)
+    campaign = Campaign([replace(r, samples={}) for r in campaign.runs])
     names = campaign.names
     if not np.isfinite(campaign.torque_measured).any():
         raise DataError("the bags have no /clutch/measured_torque: nothing to diagnose against")

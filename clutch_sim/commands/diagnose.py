@@ -82,7 +82,9 @@ def run(args) -> int:
 
     writer = ProgressiveReport(args.out)      # each output written as soon as it is known
     with FitExecutor(args.scheduler, progress=not args.no_progress, say=say) as executor:
-        diagnose_campaign(nominal, bench_model, runs, held_out=args.held_out, candidates=args.candidates,
+        held = [runs]
+        del runs                  # the engine's reference only: the native rows are freed once decimated
+        diagnose_campaign(nominal, bench_model, held.pop(), held_out=args.held_out, candidates=args.candidates,
                           calibrate=calibrate, progress=say, checkpoint=writer, diagnosis_rate_hz=rate,
                           fit_executor=executor,
                           bench_info={"rmse": bench_fit.rmse, "rows": bench_fit.n_rows,
