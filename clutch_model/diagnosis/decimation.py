@@ -135,16 +135,20 @@ def signal_bandwidth_hz(campaign, rate_hz: float, power: float = SIGNAL_POWER, m
     from scipy.signal import welch
 
     out = 0.0
+    sizes = [len(r) for r in campaign.runs if len(r) >= 64]
+    if not sizes:
+        return out
+    nperseg = min(4096, min(sizes))                 # one frequency grid for every run
     for name in ("applied_force_n", "slip_speed_rad_s"):
         f_acc, p_acc = None, None
         used = 0
         for run in campaign.runs:
             x = np.asarray(getattr(run, name), float)
-            if x.size < 64 or used >= max_rows:
+            if x.size < nperseg or used >= max_rows:
                 continue
-            x = x[: max_rows - used]
+            x = x[: max(max_rows - used, nperseg)]
             used += x.size
-            f, p = welch(x, fs=rate_hz, nperseg=min(4096, x.size), detrend="linear")
+            f, p = welch(x, fs=rate_hz, nperseg=nperseg, detrend="linear")
             p_acc = p if p_acc is None else p_acc + p
             f_acc = f
         if p_acc is None or not np.isfinite(p_acc).all() or p_acc.sum() <= 0:
@@ -166,8 +170,11 @@ def choose_diagnosis_rate(campaign, measured_time: bool = False, rate_hz: float 
     tau = fastest_time_constant_s()
     corner = 1.0 / (2.0 * math.pi * tau)
     reasons = {"plant step": 1.0 / K.MAX_STEP_S,
-               "fastest mechanism": 2.0 * CORNER_MARGIN * corner / PASSBAND,
-               "input bandwidth": 2.0 * signal_bandwidth_hz(campaign, native) / PASSBAND}
+               "fastest mechanism": 2.0 * CORNER_MARGIN * corner / PASSBAND}
+    if rate_hz is None and native < MIN_DECIMATION * max(reasons.values()):
+        # too slow to decimate at all: the campaign is diagnosed as it is, nothing computed
+        return DecimationPlan(float(native), 1, float(max(reasons.values())), reasons)
+    reasons["input bandwidth"] = 2.0 * signal_bandwidth_hz(campaign, native) / PASSBAND
     need = max(reasons.values()) if rate_hz is None else float(rate_hz)
     if model is not None and rate_hz is None:
         # the error check below measures what the bandwidth rule guards against (the plant's

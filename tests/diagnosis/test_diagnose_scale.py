@@ -43,6 +43,8 @@ def test_rate_rule_leaves_the_design_rate_alone_and_decimates_fast_logs():
     assert choose_diagnosis_rate(Campaign([_run(500.0)])).factor == 2
     # a requested rate: the largest integer factor that keeps at least that rate
     assert choose_diagnosis_rate(Campaign([_run(1000.0)]), rate_hz=300.0).factor == 3
+    # runs of different lengths share one spectral grid
+    assert choose_diagnosis_rate(Campaign([_run(1000.0), _run(1000.0, duration_s=0.3, name="s")])).factor == 5
 
 
 def test_decimation_removes_what_would_alias_and_keeps_the_band():
