@@ -143,3 +143,19 @@ def test_diagnose_on_a_dask_cluster_equals_serial(cluster, tmp_path, capsys):
     for key in ("cause", "causes", "rmse_nm", "gain_pct", "candidates", "noise_model", "held_out_runs"):
         assert d[key] == s[key], key
     assert (tmp_path / "dask" / "extended_model.yaml").read_text() == (tmp_path / "serial" / "extended_model.yaml").read_text()
+
+
+def test_montecarlo_chunks_bound_memory_not_results():
+    """The car calibration's Monte Carlo chunks hold at most ~256 MB of predictions (an hour
+    of car data would hold GBs at once) and the chunking does not change a sample's RMSE."""
+    from clutch_model.diagnosis.calibration import montecarlo_chunk_size
+    from clutch_model.identification.montecarlo import run_montecarlo
+    from clutch_model.virtual_car import identification_data as td
+
+    assert montecarlo_chunk_size(50_000) == 256                   # small campaigns: as before
+    assert montecarlo_chunk_size(800_000) * 16 * 800_000 <= 256e6
+    model = load_model(None)
+    runs = td.synthetic_runs(model, n_runs=2, duration_s=3.0, noise_nm=10.0, seed=5)
+    a = run_montecarlo(model, runs, n_samples=30, spread=0.05, seed=2, halving=(), progress=False)
+    b = run_montecarlo(model, runs, n_samples=30, spread=0.05, seed=2, halving=(), progress=False, chunk_size=4)
+    assert np.array_equal(a.rmse, b.rmse, equal_nan=True) and np.array_equal(a.refined_a, b.refined_a)
