@@ -147,7 +147,8 @@ def test_diagnose_on_a_dask_cluster_equals_serial(cluster, tmp_path, capsys):
 
 def test_montecarlo_chunks_bound_memory_not_results():
     """The car calibration's Monte Carlo chunks hold at most ~256 MB of predictions (an hour
-    of car data would hold GBs at once) and the chunking does not change a sample's RMSE."""
+    of car data would hold GBs at once) and the chunking changes a sample's RMSE by at most
+    a rounding (numpy's row means over a differently shaped block), not the refined model."""
     from clutch_model.diagnosis.calibration import montecarlo_chunk_size
     from clutch_model.identification.montecarlo import run_montecarlo
     from clutch_model.virtual_car import identification_data as td
@@ -158,4 +159,5 @@ def test_montecarlo_chunks_bound_memory_not_results():
     runs = td.synthetic_runs(model, n_runs=2, duration_s=3.0, noise_nm=10.0, seed=5)
     a = run_montecarlo(model, runs, n_samples=30, spread=0.05, seed=2, halving=(), progress=False)
     b = run_montecarlo(model, runs, n_samples=30, spread=0.05, seed=2, halving=(), progress=False, chunk_size=4)
-    assert np.array_equal(a.rmse, b.rmse, equal_nan=True) and np.array_equal(a.refined_a, b.refined_a)
+    np.testing.assert_allclose(a.rmse, b.rmse, rtol=1e-14)
+    assert np.array_equal(a.accepted, b.accepted) and np.array_equal(a.refined_a, b.refined_a)
