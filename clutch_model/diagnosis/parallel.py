@@ -164,7 +164,7 @@ class FitExecutor:
         phase = self._phase(train)
         key = ("fit", cand.id) + phase
         main = train.train_mask is None          # a selection step (not a jackknife refit)
-        if self.conn is not None and main and cand in self._group:
+        if self.conn is not None and main and any(c is cand for c in self._group):
             for c in self._remaining(train):     # every fit of this step, ahead
                 self._submit(("fit", c.id) + phase, fit_job, c.context, c.id, c.fit_bases(train), train.mask)
         res = self._result(key, fit_job, cand.context, cand.id, bases, train.mask)
