@@ -37,7 +37,9 @@ import numpy as np  # noqa: E402
 RATE_HZ = 1000.0
 SLOW_HZ = 10.0
 RUN_MAX_S = 600.0
-DIAGNOSE_ARGS: list = []          # extra `clutch-sim diagnose` options (decimation etc.), set by its owner
+# extra `clutch-sim diagnose` options: the diagnosis decimates 1 kHz logs to its own rate by
+# default (--diagnosis-rate auto); progress bars are for terminals, not for this table
+DIAGNOSE_ARGS: list = ["--no-progress"]
 
 
 def load_avg() -> str:
@@ -135,6 +137,20 @@ def timed_process(cmd: list, env: dict) -> tuple[float, float, float, int, str]:
     return wall, cpu, rss_mb, proc.returncode, (lines[-1] if lines else "")
 
 
+def diagnose_stages(out: Path) -> str:
+    """The diagnosis' rate and stage times from its report.json."""
+    import json
+
+    try:
+        rep = json.loads((out / "report.json").read_text())
+    except (OSError, ValueError):
+        return "(no report.json)"
+    rate = rep.get("diagnosis_rate") or {}
+    stages = ", ".join(f"{k} {v:.1f}" for k, v in (rep.get("timings_s") or {}).items())
+    return (f"diagnosed at {rate.get('rate_hz', float('nan')):.0f} Hz (factor {rate.get('factor', 1)}), "
+            f"cause {rep.get('cause', {}).get('id')}; stages [s]: {stages}")
+
+
 def breakdown(bags, out_csv: Path) -> dict:
     """In-process split of a replay (`replay_bags`, the command's pipeline) in CPU s per stage:
     decode + grid, simulate (+ measured-torque prediction, RMSE sums), CSV (format + write);
@@ -198,7 +214,9 @@ def main(argv=None) -> int:
                 dwall, dcpu, drss, drc, dlast = timed_process(dcmd, env)
                 row.update({"diagnose_s": dwall, "diagnose_cpu_s": dcpu, "diagnose_peak_mb": drss, "diagnose_rc": drc})
                 print(f"{'':8} diagnose: {dwall:.1f} s (cpu {dcpu:.1f} s), {1e3 * dwall / sim_s:.1f} ms per simulated s, "
-                      f"peak {drss:.0f} MB" + ("" if drc == 0 else f" (failed: {dlast})"), flush=True)
+                      f"peak {drss:.0f} MB" + ("" if drc == 0 else f" (failed: {dlast})") + f"  (load {load_avg()})",
+                      flush=True)
+                print(f"{'':8} {diagnose_stages(camp / 'diagnose')}", flush=True)
             rows.append(row)
             if args.split or minutes == min(args.minutes):
                 b = breakdown(bags, camp / "replay_inproc.csv")

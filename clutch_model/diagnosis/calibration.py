@@ -8,6 +8,16 @@ import math
 from clutch_model.identification.calibrate import calibrate_friction
 from clutch_model.identification.montecarlo import run_montecarlo
 
+MC_CHUNK_BYTES = 256e6     # one Monte Carlo chunk's predictions (torque + pack temperature, float64)
+
+
+def montecarlo_chunk_size(n_rows: int, largest: int = 256) -> int:
+    """Samples per Monte Carlo chunk so that a chunk's predictions stay within MC_CHUNK_BYTES
+    (an hour of car data at 333 Hz: 200 samples at once would hold ~2.6 GB). A sample's RMSE
+    depends on the chunking by a rounding at most (1e-16 relative); campaigns up to ~62,000
+    rows keep the 256-sample chunks of before."""
+    return int(max(1, min(largest, MC_CHUNK_BYTES // (16 * max(int(n_rows), 1)))))
+
 
 def car_calibration(model, fit_campaign, mc_samples: int = 200, spread: float = 0.05, seed: int = 0,
                     progress=None):
@@ -21,7 +31,7 @@ def car_calibration(model, fit_campaign, mc_samples: int = 200, spread: float = 
         f"(moved {', '.join(f'a{k}' for k in cal.coefficients_moved) or 'nothing'})")
     if mc_samples > 0:
         mc = run_montecarlo(best, fit_campaign, n_samples=mc_samples, spread=spread, seed=seed,
-                            halving=(), progress=False)
+                            halving=(), progress=False, chunk_size=montecarlo_chunk_size(len(fit_campaign.t)))
         refined = mc.refined_model
         rmse_ref = mc.rmse_refined
         info["montecarlo"] = {"samples": mc_samples, "spread": spread, "seed": seed,

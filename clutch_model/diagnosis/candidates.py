@@ -74,43 +74,82 @@ def baseline_fit(calibrated: CandidateFit, base_model, context: CampaignContext,
     return ModelFit("baseline", calibrated, base_model, context, mask)
 
 
+def fit_alone(ctx: CampaignContext, mech_id: str, base_model, mask, joint: bool = False,
+              start=None) -> CandidateFit:
+    """One fit of the mechanism on ``base_model`` (module doc)."""
+    return fit_candidate(base_model, ctx.campaign, mask, mech_id, ctx.energy_total_j, ctx.torque_scale,
+                         fit_friction=joint, noise_sigma_nm=ctx.sigma_nm, start=start)
+
+
+def fit_job(ctx: CampaignContext, mech_id: str, bases: list, mask) -> tuple:
+    """``MechanismCandidate.fit`` as a plain function of its inputs (a job a Dask worker can
+    run): the mechanism alone on each base model in turn, the better on the training rows kept
+    (the first wins ties) -> (CandidateFit, index of its base)."""
+    best, k_best = None, 0
+    for k, base in enumerate(bases):
+        fit = fit_alone(ctx, mech_id, base, mask)
+        if best is None or fit.fit_rmse_nm < best.fit_rmse_nm:
+            best, k_best = fit, k
+    return best, k_best
+
+
+def refine_job(ctx: CampaignContext, mech_id: str, bases: list, start: dict, mask) -> tuple:
+    """``MechanismCandidate.refine`` as a plain function: jointly with the friction correction
+    from each base (the first from ``start``, the others from the mechanism fitted alone on
+    them), the best on the training rows -> (CandidateFit, index of its base)."""
+    best, k_best = None, 0
+    for k, base in enumerate(bases):
+        st = start if k == 0 else fit_alone(ctx, mech_id, base, mask).parameters
+        cand = fit_alone(ctx, mech_id, base, mask, joint=True, start=st)
+        if best is None or cand.fit_rmse_nm < best.fit_rmse_nm:
+            best, k_best = cand, k
+    return best, k_best
+
+
 @dataclass
 class MechanismCandidate:
-    """One catalog mechanism as a candidate (selection.Candidate)."""
+    """One catalog mechanism as a candidate (selection.Candidate). ``executor``
+    (diagnosis.parallel.FitExecutor) runs the fits, possibly ahead and elsewhere (the results
+    are the same)."""
 
     id: str
     context: CampaignContext
+    executor: object = None
 
-    def _fit(self, base_model, train: TrainingSet, joint: bool, start=None) -> ModelFit:
-        ctx = self.context
-        fit = fit_candidate(base_model, ctx.campaign, train.mask, self.id, ctx.energy_total_j, ctx.torque_scale,
-                            fit_friction=joint, noise_sigma_nm=ctx.sigma_nm, start=start)
-        return ModelFit(self.id, fit, base_model, ctx, np.asarray(train.mask, bool).copy())
-
-    def fit(self, train: TrainingSet) -> ModelFit:
+    def fit_bases(self, train: TrainingSet) -> list:
         """The mechanism alone on the model so far; at the first step also on the bench
         friction (a car calibration may have absorbed part of the mechanism: a preload reads
-        as less friction), the better on the training rows kept."""
-        best = self._fit(train.base.model, train, joint=False)
+        as less friction)."""
+        bases = [train.base.model]
         ctx = self.context
-        if not train.selected and ctx.bench_model is not None:
-            alt = self._fit(ctx.bench_model.with_mechanisms(list(train.base.model.mechanisms)), train, joint=False)
-            if alt.fit.fit_rmse_nm < best.fit.fit_rmse_nm:
-                best = alt
-        return best
-
-    def refine(self, fitted: ModelFit, train: TrainingSet) -> ModelFit:
-        ctx = self.context
-        # the baseline's friction before its correction (refitted jointly), else the model so far
-        bases = [train.base.base_model if train.base.id == "baseline" else train.base.model]
         if not train.selected and ctx.bench_model is not None:
             bases.append(ctx.bench_model.with_mechanisms(list(train.base.model.mechanisms)))
-        best = None
-        for base in bases:
-            start = fitted.parameters
-            if base is not bases[0]:          # the bench friction: the mechanism alone first
-                start = self._fit(base, train, joint=False).parameters
-            cand = self._fit(base, train, joint=True, start=start)
-            if best is None or cand.fit.fit_rmse_nm < best.fit.fit_rmse_nm:
-                best = cand
-        return best
+        return bases
+
+    def refine_bases(self, train: TrainingSet) -> list:
+        """The baseline's friction before its correction (refitted jointly), else the model so
+        far; at the first step also the bench friction."""
+        bases = [train.base.base_model if train.base.id == "baseline" else train.base.model]
+        ctx = self.context
+        if not train.selected and ctx.bench_model is not None:
+            bases.append(ctx.bench_model.with_mechanisms(list(train.base.model.mechanisms)))
+        return bases
+
+    def _model_fit(self, result, bases, train) -> ModelFit:
+        fit, k = result
+        return ModelFit(self.id, fit, bases[k], self.context, np.asarray(train.mask, bool).copy())
+
+    def fit(self, train: TrainingSet) -> ModelFit:
+        """The better of the mechanism fitted alone on each of ``fit_bases`` (training rows)."""
+        bases = self.fit_bases(train)
+        if self.executor is not None:
+            fitted = self._model_fit(self.executor.fit(self, train, bases), bases, train)
+            self.executor.note_fit(self, train, fitted)
+            return fitted
+        return self._model_fit(fit_job(self.context, self.id, bases, train.mask), bases, train)
+
+    def refine(self, fitted: ModelFit, train: TrainingSet) -> ModelFit:
+        bases = self.refine_bases(train)
+        if self.executor is not None:
+            return self._model_fit(self.executor.refine(self, fitted, train, bases), bases, train)
+        return self._model_fit(refine_job(self.context, self.id, bases, fitted.parameters, train.mask), bases, train)

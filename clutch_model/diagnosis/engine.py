@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -28,6 +28,7 @@ from clutch_model.plant.params import ClutchModel
 from clutch_model.replay import replay_runs
 from clutch_model.formats.bag_reader import Campaign
 from clutch_model.plant.mechanisms import CATALOG
+from clutch_model.diagnosis.decimation import choose_diagnosis_rate, decimate_campaign
 from clutch_model.diagnosis.measured_time import measured_time_campaign, topics_unaligned
 from clutch_model.plant.simulate import SimResult
 from clutch_model.diagnosis import features as F
@@ -163,6 +164,7 @@ class Diagnosis:
     calibration_info: dict = field(default_factory=dict)
     timings: dict = field(default_factory=dict)
     discovery: "DiscoveryOutcome | None" = None
+    diagnosis_rate: dict = field(default_factory=dict)   # decimation plan (diagnosis.decimation)
 
     @property
     def gain_pct(self) -> float:
@@ -224,7 +226,8 @@ def ripple_columns(campaign: Campaign, torque: np.ndarray):
 
 def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held_out=None,
                       candidates=None, calibrate=None, progress=None, bench_info=None,
-                      checkpoint=None, measured_time=None, discover=True) -> Diagnosis:
+                      checkpoint=None, measured_time=None, discover=True, diagnosis_rate_hz=None,
+                      fit_executor=None) -> Diagnosis:
     """Diagnose a campaign given the bench-fitted model. ``measured_time`` (default: when the
     torque and force topics are not aligned) compares model and measurement at the measured
     torque's own stamps (``measured_time_campaign``) instead of the replay grid.
@@ -234,7 +237,11 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
     "bag[t0:t1]") to hold out instead of the automatic split. ``checkpoint(stage, **outputs)``
     is called as each stage completes ("split", "calibrated", "selected"). ``discover``: when the
     catalog leaves structure (unexplained), search terms beyond the catalog
-    (clutch_model.discovery) and name ``discovered`` when they pass the same held-out rules."""
+    (clutch_model.discovery) and name ``discovered`` when they pass the same held-out rules.
+    ``diagnosis_rate_hz``: None (default) decimates fast logs to the rate the diagnosis needs
+    (diagnosis.decimation; campaigns below twice that rate are left as they are), a number asks
+    for that rate, 0 keeps the native rows. ``fit_executor``: where candidate fits run
+    (diagnosis.parallel.FitExecutor: serial, a local cluster or a Dask scheduler)."""
     tick = time.perf_counter()
     timings = {}
     say = progress or (lambda msg: None)
@@ -242,6 +249,7 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
 
     # -- stage 1: split ---------------------------------------------------------------------
     campaign = runs if isinstance(runs, Campaign) else Campaign(list(runs))
+    del runs                      # long logs: the native rows go once regridded / decimated
     if measured_time is None:
         measured_time = topics_unaligned(campaign.runs)
     if measured_time:
@@ -251,9 +259,19 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
         # rows at the torque's stamps are far apart (20 ms at 50 Hz) and the plant holds each
         # row's inputs over its step: give it the force of the step's midpoint (input_hold)
         campaign = with_midpoint_force(campaign)
+    # fast logs: anti-aliased decimation to the rate the diagnosis needs (diagnosis.decimation)
+    plan = None
+    if diagnosis_rate_hz is None or diagnosis_rate_hz > 0:
+        plan = choose_diagnosis_rate(campaign, measured_time, diagnosis_rate_hz, model=nominal)
+        campaign = decimate_campaign(campaign, plan, measured_time)
+        say(plan.describe())
+    timings["prepare (regrid, decimate)"] = time.perf_counter() - tick
     campaign = smooth_sump(campaign)
     # lock-up phases (found from the slip data, diagnosis.lockup): the driveline sets the torque
     campaign, locked = without_locked_rows(campaign)
+    # each topic's raw samples served the regridding and the lock-up detection; nothing after
+    # reads them (an hour at 1 kHz: ~0.5 GB)
+    campaign = Campaign([replace(r, samples={}) for r in campaign.runs])
     names = campaign.names
     if not np.isfinite(campaign.torque_measured).any():
         raise DataError("the bags have no /clutch/measured_torque: nothing to diagnose against")
@@ -267,7 +285,8 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
     fit_runs = split.fit_runs(names)
     say(f"split: {split.how}; held out {', '.join(split.labels)}"
         + (f"; {int(locked.sum())} locked rows kept out of the residuals" if locked.any() else ""))
-    emit("split", split=split, locked_rows=int(locked.sum()))
+    diagnosis_rate = plan.to_json() if plan is not None else {"factor": 1, "native": True}
+    emit("split", split=split, locked_rows=int(locked.sum()), diagnosis_rate=diagnosis_rate)
 
     # -- stage 2: calibrate -----------------------------------------------------------------
     nominal_rep = replay_runs(nominal, campaign)
@@ -312,7 +331,10 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
                          feature_names=lib_names, groups=campaign.run_index)
     data.per_run_feature_names, data.per_run_features = ripple_columns(campaign, calibrated.predicted)
     base = baseline_fit(calibrated, cal_base, ctx, fit_mask & scored)
-    sel = select_causes(data, base, [MechanismCandidate(cid, ctx) for cid in ids], alpha=ALPHA,
+    cands = [MechanismCandidate(cid, ctx) for cid in ids]
+    if fit_executor is not None:
+        fit_executor.register(cands)
+    sel = select_causes(data, base, cands, alpha=ALPHA,
                         min_gain_frac=NAMED_GAIN_FRAC, structure_min_gain_frac=STRUCTURE_GAIN_FRAC,
                         plain_gain=True, progress=say)
     timings["candidates"] = time.perf_counter() - t0
@@ -400,7 +422,7 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
                   nominal_pred=nominal_rep.torque_sim, causes=causes, cause_ci95=cause_ci, selection=sel,
                   split=split, fit_mask=fit_mask, eval_mask=eval_mask, locked_rows=int(locked.sum()),
                   noise=noise, bench_info=bench_info or {}, calibration_info=calibration_info, timings=timings,
-                  discovery=discovery)
+                  discovery=discovery, diagnosis_rate=diagnosis_rate)
     emit("selected", diagnosis=d)
     return d
 

@@ -66,6 +66,7 @@ def report_dict(d: Diagnosis) -> dict:
         "bench_fit": d.bench_info,
         "calibration": d.calibration_info,
         "timings_s": d.timings,
+        "diagnosis_rate": d.diagnosis_rate,
     })
 
 
@@ -210,7 +211,7 @@ class ProgressiveReport:
     def __call__(self, stage: str, **kw):
         if stage == "split":
             self._partial("split done; calibrating", held_out_runs=kw["split"].labels, split=kw["split"].how,
-                          locked_rows=kw.get("locked_rows", 0))
+                          locked_rows=kw.get("locked_rows", 0), diagnosis_rate=kw.get("diagnosis_rate"))
         elif stage == "calibrated":
             header = "clutch-sim diagnose: calibrated baseline (bench fit + car calibration)"
             _save_model(kw["model"], self.out / "calibrated_model.yaml", header)

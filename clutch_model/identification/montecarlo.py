@@ -188,25 +188,14 @@ def _run_chunks(base, A, chunks, inputs, scheduler, progress, n_total):
             if bar is not None:
                 bar.close()
         return rmse, "serial", 0.0
-    from dask.distributed import Client, LocalCluster, as_completed
+    from dask.distributed import as_completed
 
-    cluster = None
-    t_start = time.perf_counter()
-    if scheduler == "local":
-        cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
-                               env={"NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"})
-        client = Client(cluster)
-        threads = 1
-        label = "dask LocalCluster (2 workers x 1 thread)"
-    else:
-        client = Client(scheduler, timeout="20s")
-        threads = None
-        label = f"dask {scheduler}"
+    from clutch_model.identification.cluster import connect
+
+    conn = connect(scheduler, warmup=_worker_warmup)
+    client, threads, label, startup = conn.client, conn.threads, conn.label, conn.startup_s
     bar = None
     try:
-        client.wait_for_workers(2 if cluster is not None else 1, timeout=60)
-        client.run(_worker_warmup, threads)
-        startup = time.perf_counter() - t_start
         bar = _progress_bar(progress, n_total)
         inputs_f = client.scatter(inputs, broadcast=True)
         futs = {client.submit(chunk_rmse, base, A[ch], inputs_f, threads, pure=False): j
@@ -219,9 +208,7 @@ def _run_chunks(base, A, chunks, inputs, scheduler, progress, n_total):
     finally:
         if bar is not None:
             bar.close()
-        client.close()
-        if cluster is not None:
-            cluster.close()
+        conn.close()
     return rmse, label, startup
 
 

@@ -233,15 +233,18 @@ def identifiability_screen(model: ClutchModel, campaign, spread: float = 0.1, tr
             a[k] *= 1.0 + sgn * local_step
             A_l.append(a)
     base = model.vector()
-    pred = predict(param_rows(base, np.vstack([A_m, np.array(A_l)])), inputs)
     m = inputs.mask
-    Tm, Tl = pred[:X.shape[0], m], pred[X.shape[0]:, m]
-    # Morris elementary effects on the whole trace
+    y = inputs.torque_measured[m]
+    # Morris elementary effects on the whole trace, one trajectory (D + 1 parameter sets) at a
+    # time: memory bounded by a trajectory, not the screen (an hour of car data: ~3 GB at once);
+    # the batch kernel computes each set independently, so the numbers are the same
     D = len(cand)
     ee = [[] for _ in range(D)]
-    rmse = np.sqrt(np.mean((Tm - inputs.torque_measured[m][None, :]) ** 2, axis=1))
+    rmse = np.empty(X.shape[0])
     for tr in range(trajectories):
         r0 = tr * (D + 1)
+        Tm = predict(param_rows(base, A_m[r0:r0 + D + 1]), inputs)[:, m]
+        rmse[r0:r0 + D + 1] = np.sqrt(np.mean((Tm - y[None, :]) ** 2, axis=1))
         for j in range(D):
             dx = X[r0 + j + 1] - X[r0 + j]
             v = int(np.argmax(np.abs(dx)))
@@ -249,7 +252,8 @@ def identifiability_screen(model: ClutchModel, campaign, spread: float = 0.1, tr
             step = dx[v] / width
             if step == 0:
                 continue
-            ee[v].append(np.sqrt(np.mean((Tm[r0 + j + 1] - Tm[r0 + j]) ** 2)) / abs(step))
+            ee[v].append(np.sqrt(np.mean((Tm[j + 1] - Tm[j]) ** 2)) / abs(step))
+        del Tm
     effect = np.zeros(20)
     sig = np.zeros(20)
     for j, k in enumerate(cand):
@@ -262,7 +266,10 @@ def identifiability_screen(model: ClutchModel, campaign, spread: float = 0.1, tr
         mu_star[cand] = np.asarray(Si["mu_star"], float)
     except Exception:  # SALib analysis is a secondary report only
         pass
-    S = np.stack([(Tl[2 * k] - Tl[2 * k + 1]) / (2 * local_step) for k in range(20)], axis=1)  # dT/da * a
+    S = np.empty((int(np.count_nonzero(m)), 20))                                 # dT/da * a
+    for k in range(20):
+        Tl = predict(param_rows(base, np.array(A_l[2 * k:2 * k + 2])), inputs)[:, m]
+        S[:, k] = (Tl[0] - Tl[1]) / (2 * local_step)
     msqr = np.sqrt(np.mean(S ** 2, axis=0))
     thr = max(abs_threshold_nm, rel_threshold * float(effect.max()))
     strong = [k for k in cand if effect[k] >= thr]

@@ -29,6 +29,15 @@ def add_parser(sub):
     p.add_argument("--mc-samples", type=int, default=200,
                    help="Monte Carlo samples of the car calibration (0 = regression only; default 200)")
     p.add_argument("--seed", type=int, default=0, help="Monte Carlo seed")
+    p.add_argument("--diagnosis-rate", default="auto", metavar="HZ|auto|native",
+                   help="row rate the diagnosis works at: 'auto' (default) decimates fast logs (anti-aliased) to "
+                        "the rate the diagnosis needs (about 200 Hz; campaigns below twice that are left as they "
+                        "are), a number in Hz asks for that rate, 'native' keeps every row (docs/diagnosis.md)")
+    p.add_argument("--scheduler", default=None, metavar="ADDRESS|local",
+                   help="run the candidate fits on a Dask cluster: a scheduler address (tcp://host:8786) or "
+                        "'local' (a 2-worker LocalCluster on this machine); default: in this process. "
+                        "The results equal the serial run's")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars on stderr (stage lines stay)")
     add_topic_options(p)
     p.set_defaults(func=run)
 
@@ -37,6 +46,7 @@ def run(args) -> int:
     from clutch_model.formats.bench_csv import read_bench
     from clutch_model.diagnosis.calibration import car_calibration
     from clutch_model.diagnosis.engine import diagnose_campaign
+    from clutch_model.diagnosis.parallel import FitExecutor
     from clutch_model.diagnosis.report import ProgressiveReport
     from clutch_model.diagnosis.split import choose_split
     from clutch_model.errors import ParamsError
@@ -50,6 +60,7 @@ def run(args) -> int:
             raise ParamsError(f"unknown mechanism id '{bad[0]}' (known: {', '.join(CATALOG)})")
     if args.mc_samples < 0:
         raise ParamsError("--mc-samples must be >= 0")
+    rate = _diagnosis_rate(args.diagnosis_rate)
     nominal = load_model(args.params)
     bench = read_bench(args.bench)
     runs = load_runs(args, args.bags)
@@ -70,10 +81,14 @@ def run(args) -> int:
         return car_calibration(model, fit_campaign, mc_samples=args.mc_samples, seed=args.seed, progress=say)
 
     writer = ProgressiveReport(args.out)      # each output written as soon as it is known
-    diagnose_campaign(nominal, bench_model, runs, held_out=args.held_out, candidates=args.candidates,
-                      calibrate=calibrate, progress=say, checkpoint=writer,
-                      bench_info={"rmse": bench_fit.rmse, "rows": bench_fit.n_rows,
-                                  "active_constraints": [c.name for c in bench_fit.active_constraints]})
+    with FitExecutor(args.scheduler, progress=not args.no_progress, say=say) as executor:
+        held = [runs]
+        del runs                  # the engine's reference only: the native rows are freed once decimated
+        diagnose_campaign(nominal, bench_model, held.pop(), held_out=args.held_out, candidates=args.candidates,
+                          calibrate=calibrate, progress=say, checkpoint=writer, diagnosis_rate_hz=rate,
+                          fit_executor=executor,
+                          bench_info={"rmse": bench_fit.rmse, "rows": bench_fit.n_rows,
+                                      "active_constraints": [c.name for c in bench_fit.active_constraints]})
     rep = json.loads((Path(args.out) / "report.json").read_text())
     for c in rep["causes"] or [rep["cause"]]:
         print(f"cause: {c['id']}" + (f" {c['parameters']}" if c.get("parameters") else "")
@@ -83,3 +98,21 @@ def run(args) -> int:
           f"extended {r['extended']:.2f} (gain {rep['gain_pct']:.1f} %) on {', '.join(rep['held_out_runs'])}")
     print(f"report: {args.out}/report.html")
     return 0
+
+
+def _diagnosis_rate(text: str):
+    """--diagnosis-rate -> None (auto), 0 (native rows) or a rate in Hz."""
+    from clutch_model.errors import ParamsError
+
+    t = str(text).strip().lower()
+    if t == "auto":
+        return None
+    if t == "native":
+        return 0.0
+    try:
+        v = float(t)
+    except ValueError:
+        raise ParamsError(f"--diagnosis-rate must be 'auto', 'native' or a rate in Hz, not '{text}'") from None
+    if not v > 0 or v != v or v == float("inf"):
+        raise ParamsError(f"--diagnosis-rate must be a positive rate in Hz, not '{text}'")
+    return v
