@@ -98,7 +98,7 @@ def live_replay(bag_paths, namespace: str = "/clutch", out_mcap="out/live.mcap",
         player = Player(node, executor, namespace, clock=True, progress=progress, discovery_timeout_s=60.0,
                         node_alive=lambda: proc.poll() is None)
         recorder = Recorder(node, out_mcap, namespace, log_time=lambda: player.sim_now_ns, overwrite=True,
-                            gated=True)
+                            gated=True, lockstep=True)
         player.recorder = recorder
         try:
             result = player.play(paths, topics)

@@ -319,7 +319,8 @@ def play(paths, namespace: str = "/clutch", *, clock: bool = False, rate: float 
             from clutch_sim_ros.record import Recorder
 
             log_time = (lambda: player.sim_now_ns) if clock else (lambda: time.time_ns())
-            recorder = Recorder(node, record_out, namespace, log_time=log_time, overwrite=overwrite, gated=True)
+            recorder = Recorder(node, record_out, namespace, log_time=log_time, overwrite=overwrite, gated=True,
+                                lockstep=bool(clock))
             player.recorder = recorder
         try:
             result = player.play(paths, topics)

@@ -104,6 +104,37 @@ class McapOut:
         return self.out
 
 
+class LatestPerLogTime:
+    """Lock-step recording: per topic, the newest message of each log time. A lock-step tick
+    that is retried (its answer was late, or its inputs reached the node after its /clock) is
+    answered again at the same sim time; the later answer is the one that counts, so a
+    message is held until its topic brings a later log time (or ``drain()``), and one at the
+    same log time replaces it. ``put`` returns the message it releases, or None."""
+
+    def __init__(self):
+        self._held: dict = {}
+        self.superseded = 0
+
+    def put(self, topic: str, item: tuple, log_time: int):
+        prev = self._held.get(topic)
+        self._held[topic] = (log_time, item)
+        if prev is None:
+            return None
+        if prev[0] == log_time:
+            self.superseded += 1
+            return None
+        return prev[1]
+
+    def is_new(self, topic: str, log_time: int) -> bool:
+        prev = self._held.get(topic)
+        return prev is None or prev[0] != log_time
+
+    def drain(self) -> list:
+        items = [item for _, item in self._held.values()]
+        self._held = {}
+        return items
+
+
 class Recorder:
     """Raw subscriptions on ``node`` to the node's outputs, written to ``out`` by a writer
     thread (the executor thread only queues the bytes, so a slow disk or the MCAP encoder
@@ -119,7 +150,7 @@ class Recorder:
 
     def __init__(self, node, out, namespace: str = "/clutch", *, log_time: Optional[Callable[[], int]] = None,
                  overwrite: bool = False, topics: Optional[list] = None, gated: bool = False,
-                 hold_early: bool = False, header_time: bool = False):
+                 hold_early: bool = False, header_time: bool = False, lockstep: bool = False):
         from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
         from clutch_model.formats.typestore import typestore
@@ -140,6 +171,9 @@ class Recorder:
         self._unstamped_wait: list = []
         self.last_stamp: dict[str, int] = {}
         self._gate_open = not gated
+        # lock-step (log time = the /clock time of the step): a retried step's answer supersedes
+        # the earlier one at the same log time (LatestPerLogTime)
+        self._latest = LatestPerLogTime() if lockstep else None
         self._subs = []
         self._data_subs = []      # the node's own outputs (not /diagnostics): must be matched
         self._queue: queue.SimpleQueue = queue.SimpleQueue()
@@ -199,6 +233,13 @@ class Recorder:
                 self._queue.put((c, int(t), d))
                 self.counts[tp] += 1
             self._early = []
+        if self._latest is not None and kind != "diag":
+            if self._latest.is_new(topic, int(t)):
+                self.counts[topic] += 1
+            released = self._latest.put(topic, (conn, int(t), data), int(t))
+            if released is not None:
+                self._queue.put(released)
+            return
         self._queue.put((conn, int(t), data))
         self.counts[topic] += 1
 
@@ -225,6 +266,9 @@ class Recorder:
             except Exception:   # context already shut down
                 pass
         self._subs, self._data_subs = [], []
+        if self._latest is not None:
+            for item in self._latest.drain():
+                self._queue.put(item)
         if self._thread.is_alive():
             self._queue.put(None)
             self._thread.join()

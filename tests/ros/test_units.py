@@ -182,3 +182,31 @@ def test_bag_reading_for_play(tmp_path):
     assert np.all(np.diff(t) > 0) and np.all(np.isfinite(run.applied_force_n))
     assert t[0] >= max(next(m.t_ns for m in msgs.messages if m.topic == n)
                        for n in ("applied_force", "slip_speed", "sump_temperature"))
+
+
+def test_lockstep_recording_keeps_the_last_answer_per_sim_time():
+    """A retried lock-step tick is answered twice at the same sim time (first with stale
+    inputs or late); the recording keeps the later answer, each topic's messages in order,
+    and releases a message only once its topic moves to a later time (or at the end)."""
+    from clutch_sim_ros.record import LatestPerLogTime
+
+    held = LatestPerLogTime()
+    written = []
+
+    def put(topic, item, t):
+        released = held.put(topic, item, t)
+        if released is not None:
+            written.append(released)
+
+    put("state", "s10-stale", 10)
+    put("torque", "q10-stale", 10)
+    put("state", "s10", 10)            # the retry's answer supersedes
+    put("torque", "q10", 10)
+    assert written == [] and held.superseded == 2
+    put("state", "s20", 20)            # a later time releases the last answer of the earlier one
+    assert written == ["s10"]
+    put("torque", "q20", 20)
+    assert written == ["s10", "q10"]
+    assert held.is_new("state", 30) and not held.is_new("state", 20)
+    written.extend(held.drain())
+    assert written == ["s10", "q10", "s20", "q20"] and held.drain() == []
