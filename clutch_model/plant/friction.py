@@ -32,6 +32,7 @@ P_MAX_MPA, THETA_MAX_C = 20.0, 230.0
 P_BOX = (0.0, P_MAX_MPA)
 THETA_BOX = (0.0, THETA_MAX_C)
 OMEGA_S_FLOOR = 1e-6
+EXP_ZERO_ARG = 746.0     # exp(-x) rounds to 0.0 for x >= 745.14 (half the least subnormal)
 N_COEFFS = 20
 
 # blocks of the coefficient vector a0..a19 (table order)
@@ -47,24 +48,42 @@ CAR_W_BOX = (0.0, 30.0)
 @njit(cache=True)
 def mu_raw(a, i, w_abs, pressure_mpa, theta):
     """mu_f before the floor at 0 (P and theta clamped, omega_S floored)."""
+    return mu_raw_at(a, 0, i, w_abs, pressure_mpa, theta)
+
+
+@njit(cache=True, inline='always')
+def mu_raw_at(v, base, i, w_abs, pressure_mpa, theta):
+    """``mu_raw`` of the coefficients v[base:base + 20] (read in place: the kernels pass the
+    whole parameter vector, and a slice per call would cost a reference count per row)."""
     pr = min(max(pressure_mpa, 0.0), P_MAX_MPA)
     th = min(max(theta, 0.0), THETA_MAX_C)
     pr2, th2 = pr * pr, th * th
-    mu_c = a[0] + a[1] * pr + a[2] * pr2 + a[3] * th + a[4] * th2
-    mu_s = a[5] + a[6] * pr + a[7] * pr2 + a[8] * th + a[9] * th2
-    w_s = a[10] + a[11] * pr + a[12] * pr2 + a[13] * th + a[14] * th2
-    k_v = a[15] + a[16] * pr + a[17] * pr2 + a[18] * th + a[19] * th2
+    b = base
+    mu_c = v[b] + v[b + 1] * pr + v[b + 2] * pr2 + v[b + 3] * th + v[b + 4] * th2
+    mu_s = v[b + 5] + v[b + 6] * pr + v[b + 7] * pr2 + v[b + 8] * th + v[b + 9] * th2
+    w_s = v[b + 10] + v[b + 11] * pr + v[b + 12] * pr2 + v[b + 13] * th + v[b + 14] * th2
+    k_v = v[b + 15] + v[b + 16] * pr + v[b + 17] * pr2 + v[b + 18] * th + v[b + 19] * th2
     if w_s < OMEGA_S_FLOOR:
         w_s = OMEGA_S_FLOOR
     r = w_abs / w_s
-    e = math.exp(-(r ** i)) if r < 1e6 else 0.0
+    e = 0.0
+    if r < 1e6:
+        x = r ** i
+        if not (x >= EXP_ZERO_ARG):     # exp(-x) is exactly 0 beyond it: skip libm's underflow path
+            e = math.exp(-x)
     return mu_c + (mu_s - mu_c) * e + k_v * w_abs
 
 
 @njit(cache=True)
 def mu(a, i, w_abs, pressure_mpa, theta):
     """mu_f(w, P, theta) >= 0 (the kernels' friction coefficient)."""
-    m = mu_raw(a, i, w_abs, pressure_mpa, theta)
+    return mu_at(a, 0, i, w_abs, pressure_mpa, theta)
+
+
+@njit(cache=True, inline='always')
+def mu_at(v, base, i, w_abs, pressure_mpa, theta):
+    """``mu`` of the coefficients v[base:base + 20], read in place."""
+    m = mu_raw_at(v, base, i, w_abs, pressure_mpa, theta)
     return m if m > 0.0 else 0.0
 
 

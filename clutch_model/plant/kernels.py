@@ -12,6 +12,11 @@ State vector (float64[N_STATE]):
   10 pack force before the last advance [N]   11 length of the last advance [s]
   12 heat power |w T| of the output before the last advance (the previous row's) [W]
   13.. low-pass states of the discovered terms (one per term slot)
+  then memo slots (``_memo_*``): the viscosity, asperity pressure and hydrodynamic flow
+  factor last computed, with every input they depend on as their key. A row evaluates them at
+  the same film thickness and pack temperature several times (film step, end-of-step power,
+  the row's outputs); a value is reused only when its keys are equal, so it is the value the
+  call would return, bit for bit, whatever state or parameters come next.
 
 Force chain (the pack_force path, mechanisms in catalog order): measured force (negative -> 0)
 -> actuator_lag (first order) -> actuator_hysteresis (play operator) -> spring_preload
@@ -38,7 +43,12 @@ from clutch_model.plant.friction import P_MAX_MPA, THETA_MAX_C
 
 S_H, S_THETA, S_FHYST, S_FPACK, S_ENERGY, S_SIGN, S_POWER, S_FLAG, S_FTARGET = range(9)
 S_ANGLE, S_FPREV, S_DT, S_PPREV, S_TERM0 = 9, 10, 11, 12, 13
-N_STATE = S_TERM0 + P.MAX_DISCOVERED_TERMS
+S_MEMO0 = S_TERM0 + P.MAX_DISCOVERED_TERMS
+# memo slots: a flag (1 = filled), the keys, the value
+(M_VISC_OK, M_VISC_THETA, M_VISC_A0, M_VISC_A1, M_VISC,
+ M_PA_OK, M_PA_H, M_PA_SIGMA, M_PA_KP, M_PA,
+ M_HY_OK, M_HY_HH, M_HY) = range(S_MEMO0, S_MEMO0 + 13)
+N_STATE = S_MEMO0 + 13
 
 # signals the discovered terms are built from (defined in layout, numba-free)
 from clutch_model.plant.layout import (SIG_NONE, SIG_PRESSURE, SIG_PACK_TEMP, SIG_SLIP_ABS,  # noqa: E402
@@ -67,7 +77,7 @@ SUMP_MIN, SUMP_MAX = -100.0, 500.0
 H_MAX = 1.0e-2            # film cap [m]: far beyond any open-clutch gap
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def greenwood_williamson_fe(x):
     """F_e(x) = 1/sqrt(2 pi) * int_x^inf (s - x) exp(-s^2/2) ds (eq. 3.7), closed form."""
     v = math.exp(-0.5 * x * x) * INV_SQRT_2PI - x * 0.5 * math.erfc(x / SQRT2)
@@ -96,7 +106,7 @@ def derived_constants(p):
     return d
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def viscosity(theta, p):
     """ATF dynamic viscosity [Pa s], eq. 3.17, theta clamped to [1, 1e6] C (the upper bound
     is far outside any clutch; it only keeps a runaway parameter set's viscosity above 0, so
@@ -107,10 +117,60 @@ def viscosity(theta, p):
     return p[P.ALPHA0] * th ** (-p[P.ALPHA1])
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
+def hydrodynamic_flow_factor(hh):
+    """phi_f + phi_fs of the hydrodynamic torque (eq. 3.10-3.11) at h / sigma."""
+    phi_f = 1.0 + 0.5 * math.exp(-0.8 * hh)
+    phi_fs = 11.1 * hh ** 2.31 * math.exp(-2.38 * hh + 0.11 * hh * hh) if hh <= 5.0 else 0.0
+    return phi_f + phi_fs
+
+
+@njit(cache=True, inline='always')
+def _memo_viscosity(state, theta, p):
+    """viscosity(theta, p), reused from the state's memo when theta and alpha_0/1 are equal."""
+    if (state[M_VISC_OK] == 1.0 and state[M_VISC_THETA] == theta and state[M_VISC_A0] == p[P.ALPHA0]
+            and state[M_VISC_A1] == p[P.ALPHA1]):
+        return state[M_VISC]
+    v = viscosity(theta, p)
+    state[M_VISC_OK] = 1.0
+    state[M_VISC_THETA] = theta
+    state[M_VISC_A0] = p[P.ALPHA0]
+    state[M_VISC_A1] = p[P.ALPHA1]
+    state[M_VISC] = v
+    return v
+
+
+@njit(cache=True, inline='always')
+def _memo_asperity_pressure(state, h, p, d):
+    """asperity_pressure(h, p, d), reused when h, sigma and k_P are equal."""
+    if (state[M_PA_OK] == 1.0 and state[M_PA_H] == h and state[M_PA_SIGMA] == p[P.SIGMA]
+            and state[M_PA_KP] == d[D_KP]):
+        return state[M_PA]
+    v = asperity_pressure(h, p, d)
+    state[M_PA_OK] = 1.0
+    state[M_PA_H] = h
+    state[M_PA_SIGMA] = p[P.SIGMA]
+    state[M_PA_KP] = d[D_KP]
+    state[M_PA] = v
+    return v
+
+
+@njit(cache=True, inline='always')
+def _memo_flow_factor(state, hh):
+    """hydrodynamic_flow_factor(hh), reused when h / sigma is equal."""
+    if state[M_HY_OK] == 1.0 and state[M_HY_HH] == hh:
+        return state[M_HY]
+    v = hydrodynamic_flow_factor(hh)
+    state[M_HY_OK] = 1.0
+    state[M_HY_HH] = hh
+    state[M_HY] = v
+    return v
+
+
+@njit(cache=True, inline='always')
 def friction_coefficient(w_abs, pressure_mpa, theta, p):
     """Stribeck mu_f(w, P, theta) of the parameter vector (clutch_model.plant.friction)."""
-    return friction.mu(p[P.FRICTION_A:P.FRICTION_A + P.N_FRICTION_COEFFS], p[P.FRICTION_I],
+    return friction.mu_at(p, P.FRICTION_A, p[P.FRICTION_I],
                        w_abs, pressure_mpa, theta)
 
 
@@ -173,13 +233,13 @@ def discovered_terms(p, state, w, pressure_mpa, theta):
     return fac, add
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def asperity_pressure(h, p, d):
     """Mean asperity pressure P_a(h) = E * pi * N * beta * sigma * F_e(h/sigma) (eq. 3.5-3.6)."""
     return d[D_KP] * greenwood_williamson_fe(h / p[P.SIGMA])
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def film_rate(h, f_pack, mu, p, d):
     """dh/dt of eq. 3.2 and its derivative d(dh/dt)/dh.
 
@@ -188,29 +248,34 @@ def film_rate(h, f_pack, mu, p, d):
     """
     sigma = p[P.SIGMA]
     hh = h / sigma
-    phi = 1.0 - 0.9 * math.exp(-0.56 * hh)
+    # each transcendental once (the values are those of the separate calls, bit for bit)
+    e056 = math.exp(-0.56 * hh)
+    gauss = math.exp(-0.5 * hh * hh) * INV_SQRT_2PI          # standard normal density at hh
+    upper_tail = 0.5 * math.erfc(hh / SQRT2)                   # Q(hh) = P(s > hh)
+    phi = 1.0 - 0.9 * e056
     eta = 1.0 / (1.0 + p[P.BJ_CHI] * h / d[D_SQRTK])
     h3 = h * h * h
     num = h3 * (1.0 + 3.0 * eta) + d[D_KD12]
     g = 0.5 * (1.0 + math.erf(hh / SQRT2))
     c = phi * num / (mu * d[D_FILM_DEN] * g)
-    fe = greenwood_williamson_fe(hh)
+    fe = gauss - hh * upper_tail                               # greenwood_williamson_fe(hh)
+    if not (fe > 0.0):
+        fe = 0.0
     f_asp = d[D_AN] * d[D_KP] * fe
     xi = f_pack - f_asp
     rate = -c * xi
     # Jacobian: d rate/dh = -c' xi + c dF_a/dh ; dF_a/dh = -A_N kP Q(H)/sigma
-    upper_tail = 0.5 * math.erfc(hh / SQRT2)
     dfa_dh = -d[D_AN] * d[D_KP] * upper_tail / sigma
-    dphi = 0.9 * 0.56 / sigma * math.exp(-0.56 * hh)
+    dphi = 0.9 * 0.56 / sigma * e056
     deta = -eta * eta * p[P.BJ_CHI] / d[D_SQRTK]
     dnum = 3.0 * h * h * (1.0 + 3.0 * eta) + h3 * 3.0 * deta
-    dg = math.exp(-0.5 * hh * hh) * INV_SQRT_2PI / sigma
+    dg = gauss / sigma
     dc = c * (dphi / phi + dnum / num - dg / g)
     jac = -dc * xi + c * dfa_dh
     return rate, jac
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def force_chain(f_actuator, f_hyst_prev, p):
     """Hysteresis then preload on the actuator force: (hysteresis output, pack force)."""
     r = p[P.HYST_RATIO]
@@ -229,7 +294,7 @@ def force_chain(f_actuator, f_hyst_prev, p):
     return fh, f
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def film_step(h, f_start, f_target, tau, dt, mu, p, d, f_hyst):
     """Advance the film over dt. Actuator force: f_target if tau <= 0, else the first-order
     lag from f_start towards f_target (exact), sampled at each sub-step's midpoint and passed
@@ -272,7 +337,7 @@ def film_step(h, f_start, f_target, tau, dt, mu, p, d, f_hyst):
     return h
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def _clamped_force(applied_force):
     f = applied_force if applied_force > 0.0 else 0.0
     if not (f < 1e12):
@@ -280,7 +345,7 @@ def _clamped_force(applied_force):
     return f
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def pack_force_target(state, applied_force, p):
     """Take one measured-force sample: it becomes the lag's target; without a lag the
     actuator force, hysteresis and pack force follow at once. Returns the pack force."""
@@ -314,6 +379,9 @@ def init_state(state, applied_force, sump_temperature, p):
     state[S_PPREV] = 0.0
     for j in range(P.MAX_DISCOVERED_TERMS):
         state[S_TERM0 + j] = 0.0
+    state[M_VISC_OK] = 0.0
+    state[M_PA_OK] = 0.0
+    state[M_HY_OK] = 0.0
 
 
 @njit(cache=True)
@@ -334,8 +402,8 @@ def outputs(state, slip, sump_temperature, p, d, out):
         f_pack = d[D_FMAX]
         clamped = 1.0
     pressure_mpa = f_pack / d[D_AN] * 1e-6
-    mu = viscosity(theta, p)
-    pa = asperity_pressure(h, p, d)
+    mu = _memo_viscosity(state, theta, p)
+    pa = _memo_asperity_pressure(state, h, p, d)
     locked = w_abs < p[P.LOCK_SLIP]
     if not locked:
         state[S_SIGN] = 1.0 if w > 0.0 else -1.0
@@ -356,9 +424,7 @@ def outputs(state, slip, sump_temperature, p, d, out):
         mu_f = friction_coefficient(w_abs, pressure_mpa, theta, p) * degr
         t_a = sign * mu_f * pa * d[D_TA_GEOM]
         hh = h / p[P.SIGMA]
-        phi_f = 1.0 + 0.5 * math.exp(-0.8 * hh)
-        phi_fs = 11.1 * hh ** 2.31 * math.exp(-2.38 * hh + 0.11 * hh * hh) if hh <= 5.0 else 0.0
-        t_h = w * (phi_f + phi_fs) / h * mu * d[D_TH_GEOM]
+        t_h = w * _memo_flow_factor(state, hh) / h * mu * d[D_TH_GEOM]
         drag = p[P.DRAG_COEFF] * w * mu / d[D_MU60] if p[P.DRAG_COEFF] != 0.0 else 0.0
         drag += extra
     torque = t_a + t_h + drag
@@ -383,7 +449,7 @@ def outputs(state, slip, sump_temperature, p, d, out):
     return torque
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def advance(state, slip, sump_temperature, dt, p, d, scratch):
     """Integrate the state over dt with the current inputs held (the pack-force target is
     the one set by the last pack_force_target() call). Steps longer than MAX_STEP_S are
@@ -403,10 +469,10 @@ def advance(state, slip, sump_temperature, dt, p, d, scratch):
         _advance_once(state, slip, sump_temperature, h, p, d, scratch)
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def _advance_once(state, slip, sump_temperature, dt, p, d, scratch):
     theta0 = state[S_THETA]
-    mu = viscosity(theta0, p)
+    mu = _memo_viscosity(state, theta0, p)
     tau = p[P.LAG_TAU_S]
     f_start = state[S_FLAG]
     f_target = state[S_FTARGET]
@@ -473,13 +539,23 @@ def run_trajectory(p, t, force, slip, sump, run_start, energy0):
     the plant (film, pack temperature, actuator states); energy carries over."""
     n = t.size
     d = derived_constants(p)
-    out = np.zeros((n, N_OUT))
+    out = np.empty((n, N_OUT))          # every element is written (_store)
     state = np.zeros(N_STATE)
     scratch = np.zeros(N_OUT)
+    rec = np.zeros(N_OUT)
     state[S_ENERGY] = energy0
     for k in range(n):
-        _row(k, state, p, d, t, force, slip, sump, run_start, scratch, out[k])
+        _row(k, state, p, d, t, force, slip, sump, run_start, scratch, rec)
+        _store(out, k, rec)
     return out
+
+
+@njit(cache=True, nogil=True, inline='always')
+def _store(out, k, rec):
+    """out[k, :] = rec, element by element (a row view per row would cost an atomic
+    reference count each)."""
+    for j in range(N_OUT):
+        out[k, j] = rec[j]
 
 
 @njit(cache=True, parallel=True)
@@ -516,13 +592,15 @@ def run_chunk(p, d, t, force, slip, sump, run_start, state, carry, out):
     out[:n] (n = t.size), updates state and carry. Releases the GIL."""
     n = t.size
     scratch = np.zeros(N_OUT)
+    rec = np.zeros(N_OUT)
     for k in range(n):
         if k == 0 and carry[C_HAS_PREV] > 0.0 and not run_start[0]:
             advance(state, carry[C_SLIP], carry[C_SUMP], t[0] - carry[C_T], p, d, scratch)
             pack_force_target(state, force[0], p)
-            outputs(state, slip[0], sump[0], p, d, out[0])
+            outputs(state, slip[0], sump[0], p, d, rec)
         else:
-            _row(k, state, p, d, t, force, slip, sump, run_start, scratch, out[k])
+            _row(k, state, p, d, t, force, slip, sump, run_start, scratch, rec)
+        _store(out, k, rec)
     if n:
         carry[C_T] = t[n - 1]
         carry[C_SLIP] = slip[n - 1]
