@@ -178,3 +178,58 @@ def test_fuzzed_inputs_never_nan(force, slip, sump, dt):
     for arr in (r.torque_nm, r.pack_temperature_c, r.film_thickness_m, r.energy_j):
         assert np.all(np.isfinite(arr))
     assert np.all(r.film_thickness_m > 0)
+
+
+def test_kernel_memo_reuses_values_only_for_equal_inputs():
+    """The kernel keeps viscosity, asperity pressure and hydrodynamic flow factor in memo slots
+    of the state, keyed on every input they depend on. A state carried to another parameter
+    set, or with its film or temperature changed, must give exactly the outputs of the same
+    state without memo; and the memo must really be used within a trajectory."""
+    from clutch_model.plant import layout as P
+
+    p1 = MODEL.vector()
+    variants = []                              # one input of a memo changed at a time
+    for index, factor in ((P.ALPHA0, 1.3), (P.ALPHA1, 0.9), (P.SIGMA, 1.2), (P.YOUNGS, 0.8)):
+        p2 = p1.copy()
+        p2[index] *= factor
+        variants.append(p2)
+    state = np.zeros(K.N_STATE)
+    scratch = np.zeros(K.N_OUT)
+    d1 = K.derived_constants(p1)
+    K.init_state(state, 5000.0, 60.0, p1)
+    for _ in range(50):                        # engage: film thins, pack warms, memos fill
+        K.advance(state, 3.0, 60.0, 1e-3, p1, d1, scratch)
+        K.pack_force_target(state, 5000.0, p1)
+        K.outputs(state, 3.0, 60.0, p1, d1, scratch)
+    # the memos hold the values at this state's film and temperature
+    assert state[K.M_VISC_THETA] == state[K.S_THETA] and state[K.M_PA_H] == state[K.S_H]
+    assert state[K.M_VISC_OK] == state[K.M_PA_OK] == state[K.M_HY_OK] == 1.0
+
+    def both(edit, p):
+        d = K.derived_constants(p)
+        with_memo, without = state.copy(), state.copy()
+        edit(with_memo)
+        edit(without)
+        without[[K.M_VISC_OK, K.M_PA_OK, K.M_HY_OK]] = 0.0
+        outs = []
+        for s in (with_memo, without):
+            out = np.zeros(K.N_OUT)
+            K.pack_force_target(s, 5000.0, p)
+            K.outputs(s, 3.0, 60.0, p, d, out)
+            outs.append(out)
+        return outs
+
+    def thinner(s):
+        s[K.S_H] *= 0.97
+
+    def warmer(s):
+        s[K.S_THETA] += 0.5
+
+    for edit in (lambda s: None, thinner, warmer):
+        for p in [p1] + variants:
+            a, b = both(edit, p)
+            assert np.array_equal(a, b)
+    a1, _ = both(lambda s: None, p1)
+    for p2 in variants:                        # each variant's own values, not p1's
+        a2, _ = both(lambda s: None, p2)
+        assert a1[K.O_VISC] != a2[K.O_VISC] or a1[K.O_PA] != a2[K.O_PA]
