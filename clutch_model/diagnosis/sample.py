@@ -6,7 +6,7 @@ fits, refits, intervals, discovery); the plant integrates every 5.1 ms of simula
 an hour of data costs tens of CPU-minutes however it is decimated. When the (decimated)
 campaign lasts longer than ``budget_s``, those stages work on a sample instead:
 
-* **windows** of ``window_s`` (20 s) inside the runs, one per equal stratum of the campaign's
+* **windows** of ``window_s`` (10 s) inside the runs, one per equal stratum of the campaign's
   time (so the sample spans the whole log: the dissipated energy, the sump and pack
   temperature trends), each placed within its stratum where it adds the most of the
   campaign's operating range not yet covered (bins of applied force x |slip|, pack
@@ -19,7 +19,7 @@ campaign lasts longer than ``budget_s``, those stages work on a sample instead:
   its temperature. With the model whose state it is, the window reproduces the whole
   simulation bit for bit; another parameter set (a candidate) starts from that state, i.e.
   from the best estimate of the real plant's state, and is compared over the window;
-* the first ``warmup_s`` (2 s) of each window are not scored (measured torque NaN): the
+* the first ``warmup_s`` (1 s) of each window is not scored (measured torque NaN): the
   measurement mechanisms (transport delay, sensor lag) restart at each window, and a
   candidate's fast states (film, actuator lag) settle to its own dynamics;
 * the windows are the runs the split sees: whole windows are held out (the split's rule for
