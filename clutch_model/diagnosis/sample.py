@@ -176,6 +176,8 @@ def choose_windows(campaign: Campaign, budget_s: float, pack_temperature_c, slip
         strata[min(n - 1, int(s.mid_s / total * n))].append(s)
     covered, chosen = set(), []
     for group in strata:
+        # windows never share rows (a held-out window must hold nothing a fitted one has)
+        group = [s for s in group if all(s.k1 <= c.k0 or s.k0 >= c.k1 for c in chosen)]
         group = [s for s in group if s.scored >= MIN_SCORED_FRAC] or group
         if not group:
             continue
