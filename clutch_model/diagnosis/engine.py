@@ -309,6 +309,8 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
     if not (fit_mask & scored).any():
         raise DataError("the fitted data has no measured torque outside lock-up")
     fit_runs = split.fit_runs(campaign.names)
+    if sampled is not None and held_out:       # windows with fitted rows (given spans cut them)
+        fit_runs = [r.name for r, sl in campaign.slices() if (fit_mask[sl] & scored[sl]).any()]
     say(f"split: {split.how}; held out {', '.join(split.labels)}"
         + (f"; {int(locked.sum())} locked rows kept out of the residuals" if locked.any() else ""))
     diagnosis_rate = plan.to_json() if plan is not None else {"factor": 1, "native": True}
