@@ -58,6 +58,10 @@ def test_a_window_from_the_whole_simulations_state_reproduces_it():
     rows = [k0 for _, k0, _ in windows]
     fp = S.full_pass(model, camp, rows)
     assert np.array_equal(fp.torque_nm, whole.torque_nm)          # chunked = one call, bit for bit
+    # no run given a state: the kernel with start states is the plain one
+    none = simulate(model, camp.t, camp.force, camp.slip, camp.sump, run_start=camp.run_start,
+                    start_index=np.full(camp.t.size, -1), start_states=fp.states)
+    assert np.array_equal(none.torque_nm, whole.torque_nm)
     sample, idx = S.sample_campaign(camp, windows, fp.states, warmup_s=1.0)
     assert len(sample.runs) == 3 and np.array_equal(sample.t, camp.t[idx])
     pred = predict_campaign(model, sample)
