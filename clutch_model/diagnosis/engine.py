@@ -3,7 +3,9 @@
 1. split: which rows are fitted and which are held out (split.py): whole runs when there are
    enough, time spans of long runs otherwise; the simulation always runs through whole bags
    (state carried), only the scored rows differ. Locked rows (the driveline sets the torque)
-   are scored by nothing;
+   are scored by nothing. A campaign longer than the sample budget is first cut to windows,
+   each started from the plant state of a simulation of the whole campaign (diagnosis.sample):
+   the windows are its runs from here on, and whole windows are held out;
 2. calibrate: the bench-fitted friction calibrated on the fitted rows (regression + Monte
    Carlo, then the shared friction correction); written at once (calibrated_model.yaml);
 3. candidates + verdict: forward selection over the mechanism catalog (selection.py), each
