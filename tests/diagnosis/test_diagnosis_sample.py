@@ -178,3 +178,24 @@ def test_a_bad_sample_budget_is_a_one_line_error(tmp_path, capsys, bad):
               str(tmp_path / "o"), "--sample-budget-s", bad])
     err = capsys.readouterr().err.strip()
     assert rc != 0 and "--sample-budget-s" in err and len(err.splitlines()) == 1
+
+
+def test_given_held_out_spans_apply_to_the_windows_row_by_row():
+    """--held-out on a sampled campaign: the given bags / spans, in the bags' own time, decide
+    which window rows are held out (diagnose maps each window row to its bag)."""
+    from clutch_model.diagnosis.split import choose_split
+
+    camp = _campaign(n_runs=3, duration_s=60.0)
+    fp = S.full_pass(load_model(None), camp, [])
+    windows = S.choose_windows(camp, 90.0, fp.pack_temperature_c, fp.power_w)
+    starts = [k0 for _, k0, _ in windows]
+    sample, idx = S.sample_campaign(camp, windows, S.full_pass(load_model(None), camp, starts).states)
+    split = choose_split(camp.runs, ["r1", "r2[20:40]"])
+    fit, held = split.masks(camp.names, S.source_index(sample, camp.names), sample.t)
+    src = camp.run_index[idx]
+    expect = (src == 1) | ((src == 2) & (sample.t >= 20.0) & (sample.t < 40.0))
+    assert held.any() and fit.any()
+    assert not (held & ~expect).any()                    # nothing held out that was not given
+    assert not (fit & expect).any()                      # nothing given is fitted
+    # only the guard (0.25 s after each change between held-out and fitted rows) is neither
+    assert (~held & ~fit).sum() < 0.05 * sample.t.size
