@@ -38,7 +38,9 @@ RATE_HZ = 1000.0
 SLOW_HZ = 10.0
 RUN_MAX_S = 600.0
 # extra `clutch-sim diagnose` options: the diagnosis decimates 1 kHz logs to its own rate by
-# default (--diagnosis-rate auto); progress bars are for terminals, not for this table
+# default (--diagnosis-rate auto) and diagnoses campaigns longer than 180 s on a sample of
+# windows (--sample-budget-s auto; add "--sample-budget-s", "all" to time the whole campaign);
+# progress bars are for terminals, not for this table
 DIAGNOSE_ARGS: list = ["--no-progress"]
 
 

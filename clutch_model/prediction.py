@@ -35,17 +35,40 @@ class PlantInputs:
     sump: np.ndarray
     run_start: np.ndarray
     first_start_time_ns: int | None = None   # log time of the first run (campaign energy history)
+    # runs that start from a given plant state (diagnosis.sample: windows of a long campaign):
+    # start_index[k] = j >= 0 on such a run's first row, start_states[j] its state; else None
+    start_index: np.ndarray | None = None
+    start_states: np.ndarray | None = None
 
     @classmethod
     def of(cls, campaign) -> "PlantInputs":
-        """From a Campaign (or anything carrying t, force, slip, sump, run_start)."""
+        """From a Campaign (or anything carrying t, force, slip, sump, run_start). Runs with a
+        ``plant_state0`` (diagnosis.sample.WindowRun) start from that plant state."""
         if isinstance(campaign, PlantInputs):
             return campaign
         runs = getattr(campaign, "runs", None)
         start = int(runs[0].start_time_ns) if runs else None
+        index, states = None, None
+        if runs and any(getattr(r, "plant_state0", None) is not None for r in runs):
+            index = np.full(len(campaign.t), -1, dtype=np.int64)
+            states, k = [], 0
+            for r in runs:
+                if getattr(r, "plant_state0", None) is not None:
+                    index[k] = len(states)
+                    states.append(np.asarray(r.plant_state0, float))
+                k += len(r)
+            states = np.ascontiguousarray(np.stack(states))
         return cls(t=np.ascontiguousarray(campaign.t, float), force=np.ascontiguousarray(campaign.force, float),
                    slip=np.ascontiguousarray(campaign.slip, float), sump=np.ascontiguousarray(campaign.sump, float),
-                   run_start=np.ascontiguousarray(campaign.run_start, bool), first_start_time_ns=start)
+                   run_start=np.ascontiguousarray(campaign.run_start, bool), first_start_time_ns=start,
+                   start_index=index, start_states=states)
+
+    @property
+    def start(self) -> dict:
+        """The given start states as keyword arguments of simulate / simulate_batch."""
+        if self.start_states is None:
+            return {}
+        return {"start_index": self.start_index, "start_states": self.start_states}
 
     @property
     def n_rows(self) -> int:
@@ -81,20 +104,21 @@ def predict_campaign(model_or_rows, campaign, energy0_j: float | None = None, me
     if isinstance(model_or_rows, ClutchModel):
         model = model_or_rows
         e0 = initial_energy(model, inputs) if energy0_j is None else float(energy0_j)
-        sim = simulate(model, *args, run_start=inputs.run_start, energy0_j=e0)
+        sim = simulate(model, *args, run_start=inputs.run_start, energy0_j=e0, **inputs.start)
         torque = apply_measurement(model.mechanisms, inputs.t, sim.torque_nm, inputs.run_start)
         return Prediction(torque_nm=torque, plant_torque_nm=sim.torque_nm,
                           pack_temperature_c=sim.pack_temperature_c, energy0_j=e0, sim=sim)
     e0 = 0.0 if energy0_j is None else float(energy0_j)
     if isinstance(model_or_rows, np.ndarray):
-        res = simulate_batch(np.atleast_2d(model_or_rows), *args, run_start=inputs.run_start, energy0_j=e0)
+        res = simulate_batch(np.atleast_2d(model_or_rows), *args, run_start=inputs.run_start, energy0_j=e0,
+                             **inputs.start)
         torque = res.torque_nm
         if measurement:
             torque = apply_measurement(measurement, inputs.t, torque, inputs.run_start)
         return Prediction(torque_nm=torque, plant_torque_nm=res.torque_nm,
                           pack_temperature_c=res.pack_temperature_c, energy0_j=e0)
     models = list(model_or_rows)
-    res = simulate_batch(models, *args, run_start=inputs.run_start, energy0_j=e0)
+    res = simulate_batch(models, *args, run_start=inputs.run_start, energy0_j=e0, **inputs.start)
     torque = np.empty_like(res.torque_nm)
     for j, m in enumerate(models):
         torque[j] = apply_measurement(m.mechanisms, inputs.t, res.torque_nm[j], inputs.run_start)

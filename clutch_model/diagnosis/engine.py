@@ -3,7 +3,9 @@
 1. split: which rows are fitted and which are held out (split.py): whole runs when there are
    enough, time spans of long runs otherwise; the simulation always runs through whole bags
    (state carried), only the scored rows differ. Locked rows (the driveline sets the torque)
-   are scored by nothing;
+   are scored by nothing. A campaign longer than the sample budget is first cut to windows,
+   each started from the plant state of a simulation of the whole campaign (diagnosis.sample):
+   the windows are its runs from here on, and whole windows are held out;
 2. calibrate: the bench-fitted friction calibrated on the fitted rows (regression + Monte
    Carlo, then the shared friction correction); written at once (calibrated_model.yaml);
 3. candidates + verdict: forward selection over the mechanism catalog (selection.py), each
@@ -38,6 +40,8 @@ from clutch_model.diagnosis.fitting import CANDIDATE_IDS, CandidateFit, fit_cand
 from clutch_model.diagnosis.noise_model import fit_noise_model
 from clutch_model.diagnosis.selection import Selection, SelectionData, select_causes
 from clutch_model.diagnosis.split import Split, choose_split
+from clutch_model.diagnosis import sample as S
+from clutch_model.diagnosis.sample import DEFAULT_BUDGET_S
 from clutch_model.diagnosis.structure_test import input_features
 
 # Materiality of structure on car data: a named cause must cut the held-out one-step
@@ -54,6 +58,7 @@ DISCOVER_AFTER = ("unexplained", "none")
 # leaves no row between stamps 50 Hz apart), so the residual is a contiguous series the AR noise
 # model of the held-out tests can be fitted to (interleaved NaN rows would break every history)
 MEASURED_TIME_GRID_HZ = 1.0
+SAMPLE_BUDGET_S = DEFAULT_BUDGET_S
 
 
 def diagnosis_candidate_ids() -> list:
@@ -165,6 +170,7 @@ class Diagnosis:
     timings: dict = field(default_factory=dict)
     discovery: "DiscoveryOutcome | None" = None
     diagnosis_rate: dict = field(default_factory=dict)   # decimation plan (diagnosis.decimation)
+    diagnosis_sample: dict = field(default_factory=dict)  # windows of a long campaign (diagnosis.sample)
 
     @property
     def gain_pct(self) -> float:
@@ -227,7 +233,7 @@ def ripple_columns(campaign: Campaign, torque: np.ndarray):
 def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held_out=None,
                       candidates=None, calibrate=None, progress=None, bench_info=None,
                       checkpoint=None, measured_time=None, discover=True, diagnosis_rate_hz=None,
-                      fit_executor=None) -> Diagnosis:
+                      fit_executor=None, sample_budget_s=SAMPLE_BUDGET_S) -> Diagnosis:
     """Diagnose a campaign given the bench-fitted model. ``measured_time`` (default: when the
     torque and force topics are not aligned) compares model and measurement at the measured
     torque's own stamps (``measured_time_campaign``) instead of the replay grid.
@@ -241,7 +247,10 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
     ``diagnosis_rate_hz``: None (default) decimates fast logs to the rate the diagnosis needs
     (diagnosis.decimation; campaigns below twice that rate are left as they are), a number asks
     for that rate, 0 keeps the native rows. ``fit_executor``: where candidate fits run
-    (diagnosis.parallel.FitExecutor: serial, a local cluster or a Dask scheduler)."""
+    (diagnosis.parallel.FitExecutor: serial, a local cluster or a Dask scheduler).
+    ``sample_budget_s``: when the (decimated) campaign lasts longer, calibration, candidate
+    fits and verdict work on windows of it, each started from the plant state of a simulation
+    of the whole campaign (diagnosis.sample); None or 0: always the whole campaign."""
     tick = time.perf_counter()
     timings = {}
     say = progress or (lambda msg: None)
@@ -275,26 +284,54 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
     names = campaign.names
     if not np.isfinite(campaign.torque_measured).any():
         raise DataError("the bags have no /clutch/measured_torque: nothing to diagnose against")
-    split = choose_split(campaign.runs, held_out)
-    fit_mask, eval_mask = split.masks(names, campaign.run_index, campaign.t)
+    full = sampled = None
+    sample_info = S.not_sampled(sample_budget_s, S.campaign_seconds(campaign))
+    if S.plan_for(sample_budget_s, campaign):
+        # long logs: the costly stages work on windows of the campaign (diagnosis.sample)
+        t0 = time.perf_counter()
+        full, sampled = campaign, _Sampled.choose(campaign, nominal, bench_model, sample_budget_s)
+        campaign = sampled.campaign
+        sample_info = sampled.plan.to_json()
+        say(sampled.plan.describe())
+        timings["sample (whole-campaign simulations)"] = time.perf_counter() - t0
+    if sampled is not None and not held_out:
+        split = choose_split(campaign.runs, None)          # whole windows held out
+        split.how = ("whole windows of the diagnosis sample: every third from the second in log-time order, "
+                     "moved off the windows with the extreme slip or sump temperature")
+        fit_mask, eval_mask = split.masks(campaign.names, campaign.run_index, campaign.t)
+    elif sampled is not None:
+        split = choose_split(full.runs, held_out)          # the given spans, row by row
+        fit_mask, eval_mask = split.masks(names, S.source_index(campaign, names), campaign.t)
+    else:
+        split = choose_split(campaign.runs, held_out)
+        fit_mask, eval_mask = split.masks(names, campaign.run_index, campaign.t)
     scored = np.isfinite(campaign.torque_measured)
     if not (eval_mask & scored).any():
         raise DataError("the held-out data has no measured torque outside lock-up")
     if not (fit_mask & scored).any():
         raise DataError("the fitted data has no measured torque outside lock-up")
-    fit_runs = split.fit_runs(names)
+    fit_runs = split.fit_runs(campaign.names)
+    if sampled is not None and held_out:       # windows with fitted rows (given spans cut them)
+        fit_runs = [r.name for r, sl in campaign.slices() if (fit_mask[sl] & scored[sl]).any()]
     say(f"split: {split.how}; held out {', '.join(split.labels)}"
         + (f"; {int(locked.sum())} locked rows kept out of the residuals" if locked.any() else ""))
     diagnosis_rate = plan.to_json() if plan is not None else {"factor": 1, "native": True}
-    emit("split", split=split, locked_rows=int(locked.sum()), diagnosis_rate=diagnosis_rate)
+    emit("split", split=split, locked_rows=int(locked.sum()), diagnosis_rate=diagnosis_rate,
+         diagnosis_sample=sample_info)
 
     # -- stage 2: calibrate -----------------------------------------------------------------
-    nominal_rep = replay_runs(nominal, campaign)
-    nominal_resid = campaign.torque_measured - nominal_rep.torque_sim
-    bench_rep = replay_runs(bench_model, campaign)
-    energy_total = float(bench_rep.sim.energy_j[-1])
-    torque_scale = float(np.nanpercentile(np.abs(campaign.torque_measured), 95))
-    sigma_guess = F.noise_sigma(np.where(fit_mask, campaign.torque_measured - bench_rep.torque_sim, np.nan),
+    if sampled is None:
+        nominal_pred = replay_runs(nominal, campaign).torque_sim
+        bench_rep = replay_runs(bench_model, campaign)
+        bench_pred = bench_rep.torque_sim
+        energy_total = float(bench_rep.sim.energy_j[-1])
+    else:
+        # the whole campaign's simulations on the sample's rows (diagnosis.sample)
+        nominal_pred, bench_pred = sampled.nominal_pred, sampled.bench_pred
+        energy_total = sampled.energy_total_j
+    nominal_resid = campaign.torque_measured - nominal_pred
+    torque_scale = float(np.nanpercentile(np.abs((campaign if full is None else full).torque_measured), 95))
+    sigma_guess = F.noise_sigma(np.where(fit_mask, campaign.torque_measured - bench_pred, np.nan),
                                 campaign.run_start)
     if not np.isfinite(sigma_guess) or sigma_guess <= 0:
         sigma_guess = max(1e-3 * torque_scale, 1e-6)
@@ -304,9 +341,15 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
     t0 = time.perf_counter()
     if calibrate is not None:
         say("calibrating friction on the fitted data (regression + Monte Carlo)")
-        whole = all(h.whole_run for h in split.held_out)
+        # windows of a sample are held out whole unless the user gave the spans
+        whole = all(h.whole_run for h in split.held_out) and (sampled is None or not held_out)
         fit_campaign = campaign.subset(fit_runs) if whole else _masked_torque(campaign, fit_mask)
         cal_base, calibration_info = calibrate(bench_model, fit_campaign)
+        if sampled is not None:
+            # the windows from here on start from the calibrated model's states
+            t1 = time.perf_counter()
+            campaign = sampled.restart_from(cal_base)
+            timings["sample (whole-campaign simulations)"] += time.perf_counter() - t1
     timings["car calibration"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     say("fitting the baseline friction correction")
@@ -315,7 +358,7 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
     timings["friction correction"] = time.perf_counter() - t0
     calibrated.held_out_rmse_nm = _rmse(calibrated.residual, eval_mask)
     rmse = {"nominal": _rmse(nominal_resid, eval_mask),
-            "bench": _rmse(campaign.torque_measured - bench_rep.torque_sim, eval_mask),
+            "bench": _rmse(campaign.torque_measured - bench_pred, eval_mask),
             "calibrated": calibrated.held_out_rmse_nm}
     emit("calibrated", model=calibrated.model, rmse=dict(rmse), split=split, info=calibration_info)
 
@@ -372,7 +415,7 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
         if any("energy" in tid for tid in found.parameters):
             from clutch_model.discovery.identify import _record_energy_history as record_discovered_energy
 
-            record_discovered_energy(extended_model, campaign)
+            record_discovered_energy(extended_model, campaign if full is None else full)
         causes.append({"id": "discovered", "parameters": dict(found.parameters),
                        "parameters_ci95": dict(found.fitted.parameters_ci95),
                        "readings": list(found.fitted.readings),
@@ -398,7 +441,7 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
         cause_params = dict(causes[0]["parameters"])
         cause_ci = dict(causes[0]["parameters_ci95"])
         if "friction_degradation" in final_mechs:
-            _record_energy_history(extended_model, campaign)
+            _record_energy_history(extended_model, campaign if full is None else full)
     rmse["extended"] = _rmse(extended_fit.residual, eval_mask) if extended_fit else rmse["calibrated"]
     if cause == "unexplained":
         top = sorted(r2.items(), key=lambda kv: -kv[1])[:3]
@@ -419,12 +462,58 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
                   candidates=fits, scores=first, features_r2=r2, nominal_model=nominal, bench_model=bench_model,
                   calibrated_model=calibrated.model, extended_model=extended_model, campaign=campaign,
                   calibrated_fit=calibrated, calibrated_sim=sim_cal, extended_fit=extended_fit,
-                  nominal_pred=nominal_rep.torque_sim, causes=causes, cause_ci95=cause_ci, selection=sel,
+                  nominal_pred=nominal_pred, causes=causes, cause_ci95=cause_ci, selection=sel,
                   split=split, fit_mask=fit_mask, eval_mask=eval_mask, locked_rows=int(locked.sum()),
                   noise=noise, bench_info=bench_info or {}, calibration_info=calibration_info, timings=timings,
-                  discovery=discovery, diagnosis_rate=diagnosis_rate)
+                  discovery=discovery, diagnosis_rate=diagnosis_rate, diagnosis_sample=sample_info)
     emit("selected", diagnosis=d)
     return d
+
+
+@dataclass
+class _Sampled:
+    """A long campaign's diagnosis sample (diagnosis.sample): the windows, the whole
+    campaign's nominal and bench-fitted simulations on their rows, and its energy."""
+
+    full: Campaign
+    plan: S.SamplePlan
+    windows: list                  # (run index, k0, k1)
+    campaign: Campaign             # the windows as runs, started from the bench model's states
+    rows: np.ndarray               # the sample's rows in the whole campaign
+    nominal_pred: np.ndarray
+    bench_pred: np.ndarray
+    energy_total_j: float
+
+    @classmethod
+    def choose(cls, full: Campaign, nominal: ClutchModel, bench_model: ClutchModel, budget_s: float) -> "_Sampled":
+        from clutch_model.plant.mechanisms import apply_measurement
+
+        from clutch_model.prediction import PlantInputs, initial_energy
+
+        # the bench model's state wherever a window may start, then the windows
+        inputs = PlantInputs.of(full)
+        candidates = np.unique(S.start_rows(full))
+        bench = S.full_pass(bench_model, full, candidates, initial_energy(bench_model, inputs))
+        windows = S.choose_windows(full, budget_s, bench.pack_temperature_c, bench.power_w)
+        first = np.array([k0 for _, k0, _ in windows])
+        at = np.searchsorted(candidates, first)
+        assert np.array_equal(candidates[at], first)
+        camp, rows = S.sample_campaign(full, windows, bench.states[at])
+        nom = S.full_pass(nominal, full, [], initial_energy(nominal, inputs))
+
+        def measured(model, torque):
+            return apply_measurement(model.mechanisms, full.t, torque, full.run_start)[rows]
+
+        plan = S.SamplePlan(budget_s=float(budget_s), total_s=S.campaign_seconds(full),
+                            windows=[(r.source, float(r.t[0]), float(r.t[-1])) for r in camp.runs],
+                            rows_full=int(full.t.size), rows_sample=int(camp.t.size))
+        return cls(full, plan, windows, camp, rows, measured(nominal, nom.torque_nm),
+                   measured(bench_model, bench.torque_nm), float(bench.energy_end_j))
+
+    def restart_from(self, model: ClutchModel) -> Campaign:
+        """The sample with its windows started from ``model``'s states."""
+        first = [k0 for _, k0, _ in self.windows]
+        return S.with_states(self.campaign, S.full_pass(model, self.full, first).states)
 
 
 @dataclass

@@ -578,6 +578,57 @@ def run_batch(pmat, t, force, slip, sump, run_start, energy0):
     return torque, theta
 
 
+@njit(cache=True)
+def _row_from(k, state, p, d, t, force, slip, sump, run_start, start_index, start_states, scratch, out):
+    """``_row``, except that a run_start row with ``start_index[k] >= 0`` takes the plant state
+    ``start_states[start_index[k]]`` (the state another simulation had after that same row:
+    film, pack temperature, energy, actuator and term states) instead of the initial state.
+    Taking the row's force sample and writing its outputs again leaves such a state as it was,
+    so a run started from the state a whole simulation had at its row k continues exactly as
+    that simulation does."""
+    if run_start[k] and start_index[k] >= 0:
+        state[:] = start_states[start_index[k]]
+        pack_force_target(state, force[k], p)
+        return outputs(state, slip[k], sump[k], p, d, out)
+    return _row(k, state, p, d, t, force, slip, sump, run_start, scratch, out)
+
+
+@njit(cache=True)
+def run_trajectory_from(p, t, force, slip, sump, run_start, energy0, start_index, start_states):
+    """``run_trajectory`` whose runs may start from given plant states (``_row_from``)."""
+    n = t.size
+    d = derived_constants(p)
+    out = np.zeros((n, N_OUT))
+    state = np.zeros(N_STATE)
+    scratch = np.zeros(N_OUT)
+    state[S_ENERGY] = energy0
+    for k in range(n):
+        _row_from(k, state, p, d, t, force, slip, sump, run_start, start_index, start_states, scratch, out[k])
+    return out
+
+
+@njit(cache=True, parallel=True)
+def run_batch_from(pmat, t, force, slip, sump, run_start, energy0, start_index, start_states):
+    """``run_batch`` whose runs may start from given plant states (``_row_from``; every
+    parameter set starts from the same states)."""
+    m = pmat.shape[0]
+    n = t.size
+    torque = np.empty((m, n))
+    theta = np.empty((m, n))
+    for j in prange(m):
+        p = pmat[j]
+        d = derived_constants(p)
+        state = np.zeros(N_STATE)
+        scratch = np.zeros(N_OUT)
+        out = np.zeros(N_OUT)
+        state[S_ENERGY] = energy0
+        for k in range(n):
+            torque[j, k] = _row_from(k, state, p, d, t, force, slip, sump, run_start, start_index, start_states,
+                                     scratch, out)
+            theta[j, k] = out[O_THETA]
+    return torque, theta
+
+
 # carry of a trajectory between chunks (``run_chunk``): the row before the chunk's first row
 C_T, C_SLIP, C_SUMP, C_HAS_PREV = 0, 1, 2, 3
 N_CARRY = 4

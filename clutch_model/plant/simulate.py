@@ -79,16 +79,34 @@ def _sim_result(t, out) -> SimResult:
         asperity_pressure_pa=out[:, K.O_PA])
 
 
+def _start_states(start_index, start_states, n):
+    """Checked (start_index int64 (n,), start_states float64 (m, N_STATE)) or None."""
+    if start_states is None:
+        return None
+    si = np.ascontiguousarray(start_index, dtype=np.int64)
+    ss = np.ascontiguousarray(np.atleast_2d(start_states), dtype=float)
+    if si.shape != (n,) or ss.shape[1] != K.N_STATE or (si.size and si.max() >= ss.shape[0]):
+        raise ValueError("start_index must give, for each row, -1 or a row of start_states (m, N_STATE)")
+    return si, ss
+
+
 def simulate(model: ClutchModel, t, applied_force_n, slip_speed_rad_s, sump_temperature_c,
-             run_start=None, energy0_j: float = 0.0) -> SimResult:
+             run_start=None, energy0_j: float = 0.0, start_index=None, start_states=None) -> SimResult:
     """Simulate the plant over sampled inputs (zero-order hold between samples).
 
     ``run_start`` marks rows where a new test run (bag) starts: the plant restarts there
     (film at initial.film_thickness, pack at the sump temperature) while the dissipated
-    energy carries on (friction_degradation). Returns the plant signals at every sample.
+    energy carries on (friction_degradation). ``start_states`` (m, N_STATE) with
+    ``start_index`` (one per row, -1 = none): a run_start row k with start_index[k] = j starts
+    from the plant state start_states[j] instead (the state a simulation had after that row,
+    ``ChunkedSimulation.state``; diagnosis.sample). Returns the plant signals at every sample.
     """
     t, f, w, s, rs = _as_inputs(t, applied_force_n, slip_speed_rad_s, sump_temperature_c, run_start)
-    out = K.run_trajectory(model.vector(), t, f, w, s, rs, float(energy0_j))
+    given = _start_states(start_index, start_states, t.size)
+    if given is None:
+        out = K.run_trajectory(model.vector(), t, f, w, s, rs, float(energy0_j))
+    else:
+        out = K.run_trajectory_from(model.vector(), t, f, w, s, rs, float(energy0_j), *given)
     return _sim_result(t, out)
 
 
@@ -158,14 +176,19 @@ def parameter_matrix(models) -> np.ndarray:
 
 
 def simulate_batch(param_matrix, t, applied_force_n, slip_speed_rad_s, sump_temperature_c,
-                   run_start=None, energy0_j: float = 0.0) -> BatchResult:
+                   run_start=None, energy0_j: float = 0.0, start_index=None, start_states=None) -> BatchResult:
     """Run many parameter sets (rows of ``param_matrix``, see ``ClutchModel.vector``, or a
-    list of ClutchModel) over the same inputs, in parallel over the sets."""
+    list of ClutchModel) over the same inputs, in parallel over the sets. ``start_index`` /
+    ``start_states``: runs started from given plant states, as in ``simulate``."""
     if not isinstance(param_matrix, np.ndarray):
         param_matrix = parameter_matrix(param_matrix)
     pm = np.ascontiguousarray(np.atleast_2d(param_matrix), dtype=float)
     t, f, w, s, rs = _as_inputs(t, applied_force_n, slip_speed_rad_s, sump_temperature_c, run_start)
-    torque, theta = K.run_batch(pm, t, f, w, s, rs, float(energy0_j))
+    given = _start_states(start_index, start_states, t.size)
+    if given is None:
+        torque, theta = K.run_batch(pm, t, f, w, s, rs, float(energy0_j))
+    else:
+        torque, theta = K.run_batch_from(pm, t, f, w, s, rs, float(energy0_j), *given)
     return BatchResult(torque_nm=torque, pack_temperature_c=theta)
 
 

@@ -33,6 +33,12 @@ def add_parser(sub):
                    help="row rate the diagnosis works at: 'auto' (default) decimates fast logs (anti-aliased) to "
                         "the rate the diagnosis needs (about 200 Hz; campaigns below twice that are left as they "
                         "are), a number in Hz asks for that rate, 'native' keeps every row (docs/diagnosis.md)")
+    p.add_argument("--sample-budget-s", default="auto", metavar="S|auto|all",
+                   help="campaigns longer than this many seconds (after decimation) are calibrated and "
+                        "diagnosed on windows of 10 s spread over the whole log, each started from the plant "
+                        "state of a simulation of the whole campaign (docs/diagnosis_scale.md); 'auto' (default) "
+                        "= 180 s, about 3 minutes of diagnosis for an hour of 1 kHz data on 2 cores; "
+                        "'all' or 0 = always the whole campaign")
     p.add_argument("--scheduler", default=None, metavar="ADDRESS|local",
                    help="run the candidate fits on a Dask cluster: a scheduler address (tcp://host:8786) or "
                         "'local' (a 2-worker LocalCluster on this machine); default: in this process. "
@@ -61,6 +67,7 @@ def run(args) -> int:
     if args.mc_samples < 0:
         raise ParamsError("--mc-samples must be >= 0")
     rate = _diagnosis_rate(args.diagnosis_rate)
+    budget = _sample_budget(args.sample_budget_s)
     nominal = load_model(args.params)
     bench = read_bench(args.bench)
     runs = load_runs(args, args.bags)
@@ -86,7 +93,7 @@ def run(args) -> int:
         del runs                  # the engine's reference only: the native rows are freed once decimated
         diagnose_campaign(nominal, bench_model, held.pop(), held_out=args.held_out, candidates=args.candidates,
                           calibrate=calibrate, progress=say, checkpoint=writer, diagnosis_rate_hz=rate,
-                          fit_executor=executor,
+                          fit_executor=executor, sample_budget_s=budget,
                           bench_info={"rmse": bench_fit.rmse, "rows": bench_fit.n_rows,
                                       "active_constraints": [c.name for c in bench_fit.active_constraints]})
     rep = json.loads((Path(args.out) / "report.json").read_text())
@@ -115,4 +122,23 @@ def _diagnosis_rate(text: str):
         raise ParamsError(f"--diagnosis-rate must be 'auto', 'native' or a rate in Hz, not '{text}'") from None
     if not v > 0 or v != v or v == float("inf"):
         raise ParamsError(f"--diagnosis-rate must be a positive rate in Hz, not '{text}'")
+    return v
+
+
+def _sample_budget(text: str):
+    """--sample-budget-s -> seconds (0 = never sample)."""
+    from clutch_model.diagnosis.sample import DEFAULT_BUDGET_S
+    from clutch_model.errors import ParamsError
+
+    t = str(text).strip().lower()
+    if t == "auto":
+        return DEFAULT_BUDGET_S
+    if t in ("all", "off", "none"):
+        return 0.0
+    try:
+        v = float(t)
+    except ValueError:
+        raise ParamsError(f"--sample-budget-s must be 'auto', 'all' or seconds, not '{text}'") from None
+    if not (v >= 0) or v == float("inf"):
+        raise ParamsError(f"--sample-budget-s must be >= 0 seconds (0 = the whole campaign), not '{text}'")
     return v
