@@ -578,7 +578,7 @@ def run_batch(pmat, t, force, slip, sump, run_start, energy0):
     return torque, theta
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def _row_from(k, state, p, d, t, force, slip, sump, run_start, start_index, start_states, scratch, out):
     """``_row``, except that a run_start row with ``start_index[k] >= 0`` takes the plant state
     ``start_states[start_index[k]]`` (the state another simulation had after that same row:
@@ -587,7 +587,9 @@ def _row_from(k, state, p, d, t, force, slip, sump, run_start, start_index, star
     so a run started from the state a whole simulation had at its row k continues exactly as
     that simulation does."""
     if run_start[k] and start_index[k] >= 0:
-        state[:] = start_states[start_index[k]]
+        i = start_index[k]
+        for j in range(N_STATE):          # element-wise: no slice (reference count) per row
+            state[j] = start_states[i, j]
         pack_force_target(state, force[k], p)
         return outputs(state, slip[k], sump[k], p, d, out)
     return _row(k, state, p, d, t, force, slip, sump, run_start, scratch, out)
@@ -598,12 +600,14 @@ def run_trajectory_from(p, t, force, slip, sump, run_start, energy0, start_index
     """``run_trajectory`` whose runs may start from given plant states (``_row_from``)."""
     n = t.size
     d = derived_constants(p)
-    out = np.zeros((n, N_OUT))
+    out = np.empty((n, N_OUT))          # every element is written (_store)
     state = np.zeros(N_STATE)
     scratch = np.zeros(N_OUT)
+    rec = np.zeros(N_OUT)
     state[S_ENERGY] = energy0
     for k in range(n):
-        _row_from(k, state, p, d, t, force, slip, sump, run_start, start_index, start_states, scratch, out[k])
+        _row_from(k, state, p, d, t, force, slip, sump, run_start, start_index, start_states, scratch, rec)
+        _store(out, k, rec)
     return out
 
 
