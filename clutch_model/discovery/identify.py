@@ -337,7 +337,17 @@ def search(campaign, model: ClutchModel, fit_mask, noise_model=None, *, library=
     # linear start, joint refit inside the simulation; terms whose 95 % interval covers 0 are
     # dropped and the rest refitted (a ripple pair stays while either half holds)
     while chosen:
-        fit = refit(chosen)
+        try:
+            fit = refit(chosen)
+        except (ValueError, np.linalg.LinAlgError) as exc:
+            # a numerical failure of the joint refit (e.g. a term that makes the simulation run
+            # away at every step the solver tries) means these terms cannot be fitted: none is
+            # named, and the report says why
+            text = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+            out.dropped.append(([t.id for t in chosen], [], f"dropped: the joint refit failed ({text})"))
+            say(f"discovery: the joint refit of {', '.join(t.id for t in chosen)} failed ({text})")
+            chosen = []
+            break
         keep = _significant(chosen, fit["ci"])
         why = "95 % interval covers 0"
         if len(keep) == len(chosen):

@@ -42,3 +42,23 @@ def test_nothing_to_find_returns_the_model_so_far():
     assert fitted.parameters == {} and fitted.model is tc.calibrated_model
     from clutch_model.replay import replay_runs
     np.testing.assert_allclose(fitted.predict(None), replay_runs(tc.calibrated_model, camp).torque_sim, atol=1e-9)
+
+
+def test_a_refit_that_fails_numerically_names_nothing_and_says_why(monkeypatch):
+    """A joint refit that breaks down (scipy: "array must not contain infs or NaNs", seen when a
+    term makes the simulation run away) ends the search with no term and a reason; it must not
+    escape as an exception (diagnose would show a traceback)."""
+    import clutch_model.discovery.identify as identify
+
+    def broken(*args, **kwargs):
+        raise ValueError("array must not contain infs or NaNs")
+
+    monkeypatch.setattr(identify, "least_squares", broken)
+    tc = make_case(41, {"mu:pressure*pack_temperature": 2.5e-3})
+    camp = tc.campaign
+    held = np.isin(camp.run_index, [camp.names.index(n) for n in tc.held_out])
+    train = SimpleNamespace(mask=~held, base=SimpleNamespace(model=tc.calibrated_model), selected=())
+    fitted = DiscoveryCandidate(camp, bench_model=tc.bench_model).fit(train)
+    assert fitted.parameters == {} and fitted.model is tc.calibrated_model
+    assert any("joint refit failed (array must not contain infs or NaNs)" in d[2] for d in fitted.dropped)
+    assert np.isfinite(fitted.predict(None)).all()
