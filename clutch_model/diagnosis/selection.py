@@ -104,6 +104,7 @@ class CandidateScore:
     id: str
     fitted: object
     comparison: PredictiveComparison
+    own: object = None      # against its mechanism-free twin (PredictiveComparison; False: no twin; None: not run)
 
     @property
     def significant(self) -> bool:
@@ -145,6 +146,28 @@ class Selection:
 
 def _resid(data: SelectionData, fitted) -> np.ndarray:
     return np.asarray(data.y, float) - np.asarray(fitted.predict(data), float)
+
+
+def _below_resolution(fitted) -> str | None:
+    """A fitted candidate may declare itself unresolvable by the data (``below_resolution``: a
+    reason, e.g. a lag shorter than the rows' time resolution); it is then never named."""
+    return getattr(fitted, "below_resolution", None)
+
+
+def _own_contribution(data: SelectionData, fitted, max_order):
+    """Held-out comparison of a fitted candidate with its mechanism-free twin (the same fit with
+    the mechanism taken out, ``fitted.without_mechanism()``), or False when the candidate has no
+    twin. The candidate must beat it: a gain that the twin has as well came from what was
+    refitted alongside (the friction correction), not from the mechanism. Measured on
+    `car / none / 44`: a hysteresis of ratio 0.0012, refitted with the friction from the bench
+    fit, cut the held-out RMSE 10.52 -> 10.25 N*m at t = 4.1, while the model with that
+    hysteresis against the truth was no better than without it."""
+    twin = getattr(fitted, "without_mechanism", None)
+    pred = twin() if twin is not None else None
+    if pred is None:
+        return False
+    resid_twin = np.asarray(data.y, float) - np.asarray(pred, float)
+    return _compare(data, resid_twin, _resid(data, fitted), max_order)
 
 
 def _train_mse(data: SelectionData, fitted) -> float:
@@ -257,16 +280,22 @@ def select_causes(data: SelectionData, baseline, candidates: Sequence, alpha: fl
         for cand in remaining:
             cmp = _compare(data, resid_cur, _resid(data, fits[cand.id]), max_order)
             scores.append(CandidateScore(cand.id, fits[cand.id], cmp))
-        scores.sort(key=lambda s: (not s.comparison.significant(alpha, min_gain_frac, plain_gain),
-                                   -s.comparison.delta_ll))
+        def nameable(s):
+            if not s.comparison.significant(alpha, min_gain_frac, plain_gain) or _below_resolution(s.fitted):
+                return False
+            if s.own is None:
+                s.own = _own_contribution(data, s.fitted, max_order)
+            return s.own is False or s.own.significant(alpha, min_gain_frac, plain_gain)
+
+        scores.sort(key=lambda s: (not nameable(s), -s.comparison.delta_ll))
         best = scores[0]
-        if not best.comparison.significant(alpha, min_gain_frac, plain_gain):
+        if not nameable(best):
             steps.append(SelectionStep(scores, None, []))
             break
         resid_best = _resid(data, best.fitted)
         look = []
         for other in scores[1:]:
-            if not other.comparison.significant(alpha, min_gain_frac, plain_gain):
+            if not nameable(other):
                 continue
             head = _compare(data, _resid(data, other.fitted), resid_best, max_order)
             if not (head.p_value < lookalike_alpha and head.delta_ll > 0):
