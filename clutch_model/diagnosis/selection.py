@@ -242,6 +242,56 @@ def _backfit(data: SelectionData, named: list, cand_by_id: dict, current):
     return current
 
 
+def _refit_chain(data: SelectionData, baseline, ids: list, cand_by_id: dict, refine: bool):
+    """The causes ``ids`` fitted in this order on top of the baseline (each on the model so far,
+    refined when the candidate can be), then backfitted together -> (model, [Cause])."""
+    current, causes = baseline, []
+    for cid in ids:
+        cand = cand_by_id[cid]
+        train = TrainingSet(data, current, tuple(c.id for c in causes))
+        fitted = cand.fit(train)
+        if refine and hasattr(cand, "refine"):
+            better = cand.refine(fitted, train)
+            if better is not None and _train_mse(data, better) <= _train_mse(data, fitted):
+                fitted = better
+        current = fitted
+        causes.append(Cause(cid, fitted, dict(fitted.parameters), {}, None))
+        if len(causes) >= 2:
+            current = _backfit(data, causes, cand_by_id, current)
+    return current, causes
+
+
+def _backward_elimination(data, baseline, named, cand_by_id, current, alpha, min_gain_frac, plain_gain,
+                          max_order, refine, say):
+    """Every named cause must hold with the others in the model: the model without it (the
+    others refitted, in their order, and backfitted) must predict the held-out residual
+    significantly worse than the model with every cause. Forward selection names a cause on
+    top of the causes before it, and a cause named early may be one the later ones make
+    redundant: a 150 ms transport delay with drag (lockup seed 47) was read as a 107 ms delay,
+    then a 43 ms actuator lag on top, then drag; with drag in the model the delay alone
+    explains it. The weakest cause (by its held-out t when named) is tried first; one is
+    dropped at a time. -> (model, causes, [what was dropped and why])."""
+    dropped = []
+    while len(named) >= 2:
+        resid_full = _resid(data, current)
+        for cause in sorted(named, key=lambda c: c.comparison.t_stat if c.comparison is not None else 0.0):
+            others = [c.id for c in named if c is not cause]
+            say(f"does {cause.id} hold with {', '.join(others)} refitted without it?")
+            model_wo, causes_wo = _refit_chain(data, baseline, others, cand_by_id, refine)
+            cmp = _compare(data, _resid(data, model_wo), resid_full, max_order)
+            if not cmp.significant(alpha, min_gain_frac, plain_gain):
+                for c in causes_wo:
+                    old = next(n for n in named if n.id == c.id)
+                    c.comparison = old.comparison
+                dropped.append(f"{cause.id} dropped: with {', '.join(others)} refitted without it the held-out "
+                               f"prediction is no worse (t = {cmp.t_stat:.1f})")
+                named, current = causes_wo, model_wo
+                break
+        else:
+            break
+    return current, named, dropped
+
+
 def select_causes(data: SelectionData, baseline, candidates: Sequence, alpha: float = ALPHA,
                   min_gain_frac: float = MIN_GAIN_FRAC, lookalike_alpha: float = LOOKALIKE_ALPHA,
                   max_causes: int = MAX_CAUSES, intervals: bool = True, max_order: int = DEFAULT_MAX_ORDER,
@@ -309,6 +359,13 @@ def select_causes(data: SelectionData, baseline, candidates: Sequence, alpha: fl
         resid_cur = _resid(data, current)
         remaining = [c for c in remaining if c.id != best.id]
 
+    dropped = []
+    if len(named) >= 2:
+        current, named, dropped = _backward_elimination(data, baseline, named, {c.id: c for c in candidates},
+                                                        current, alpha, min_gain_frac, plain_gain, max_order,
+                                                        refine_top > 0, say)
+        resid_cur = _resid(data, current)
+
     say("structure test of what remains")
     rem_struct = _remainder_test(data, resid_cur, alpha, structure_min_gain_frac, max_order) if named else base_struct
     structured_left = bool(rem_struct is not None and rem_struct.structured)
@@ -335,6 +392,8 @@ def select_causes(data: SelectionData, baseline, candidates: Sequence, alpha: fl
     if named and not structured_left and not unresolved:
         why = "; ".join(f"{c.id} (held-out t = {c.comparison.t_stat:.1f}, innovation variance -"
                         f"{100 * c.comparison.gain_frac:.1f} %)" for c in named)
+        if dropped:
+            why += "; " + "; ".join(dropped)
         return Selection("named", named, steps, current, base_struct, rem_struct, [], {},
                          f"named in order: {why}; what remains is indistinguishable from noise on held-out data")
     if not named and not structured_left:
@@ -342,6 +401,15 @@ def select_causes(data: SelectionData, baseline, candidates: Sequence, alpha: fl
         why = ("no candidate predicts the held-out residual better than the noise model"
                + (f" (best {best.id}: t = {best.comparison.t_stat:.1f})" if best else "")
                + " and the inputs predict nothing in it")
+        if best is not None and best.comparison.significant(alpha, min_gain_frac, plain_gain):
+            if _below_resolution(best.fitted):
+                not_named = _below_resolution(best.fitted)
+            else:
+                own = best.own
+                not_named = (f"without {best.id} the same fit predicts the held-out residual as well"
+                             + (f" (t = {own.t_stat:.1f})" if own not in (None, False) else ""))
+            why = (f"{best.id} predicts the held-out residual (t = {best.comparison.t_stat:.1f}) but is not "
+                   f"named: {not_named}; the inputs predict nothing in the residual")
         return Selection("none", [], steps, baseline, base_struct, rem_struct, [], {}, why)
     # unexplained
     if named:
