@@ -33,7 +33,7 @@ from clutch_model.diagnosis.measured_time import measured_time_campaign, topics_
 from clutch_model.plant.simulate import SimResult
 from clutch_model.diagnosis import features as F
 from clutch_model.diagnosis.candidates import CampaignContext, MechanismCandidate, baseline_fit
-from clutch_model.diagnosis.input_hold import with_midpoint_force, with_midpoint_row_force
+from clutch_model.diagnosis.input_hold import with_midpoint_force
 from clutch_model.diagnosis.fitting import CANDIDATE_IDS, CandidateFit, fit_candidate
 from clutch_model.diagnosis.noise_model import fit_noise_model
 from clutch_model.diagnosis.selection import Selection, SelectionData, select_causes
@@ -265,10 +265,6 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
         plan = choose_diagnosis_rate(campaign, measured_time, diagnosis_rate_hz, model=nominal)
         campaign = decimate_campaign(campaign, plan, measured_time)
         say(plan.describe())
-    if not measured_time:
-        # one grid: the plant holds each row's force over its step (half a row late, 2.5 ms at
-        # 200 Hz, which reads as structure on data with nothing hidden): midpoint force (input_hold)
-        campaign = with_midpoint_row_force(campaign)
     timings["prepare (regrid, decimate)"] = time.perf_counter() - tick
     campaign = smooth_sump(campaign)
     # lock-up phases (found from the slip data, diagnosis.lockup): the driveline sets the torque

@@ -8,16 +8,6 @@ with no effect at all. Given the force at the step's midpoint (t_k + t_{k+1}) / 
 interpolated between its own logged samples, the held value is the midpoint rule's: the film
 sees the force of its step, second-order accurate and without lag.
 
-On one shared grid (every topic logged at the row rate, lab clocks, or a decimated fast log)
-the same holds at the row interval: 2.5 ms at 200 Hz. The rows' own force, linearly
-interpolated to each step's midpoint (``with_midpoint_row_force``), removes it. Measured on a
-`none` campaign with white noise plus a slow drift (matrix none@drift, seed 1, 4 runs x 8 s):
-the calibrated model driven with the row's force leaves a residual the inputs predict
-(structure t = 5.6, mostly the force's and torque's rates; held-out RMSE 8.90 N*m), given the
-midpoint force t = -0.1 and RMSE 8.66 N*m; simulated on a 5x finer grid with the inputs
-interpolated (the truth's own way) 8.65 N*m and t = 0.1 (0.29 N*m RMS from the midpoint rule,
-1.4 N*m from the row-held force).
-
 Only the force: the film's squeeze dynamics integrate it. The slip and sump temperature enter
 the torque at the row's own time (Stribeck and hydrodynamic terms) and the slow pack heat
 balance over the step, where half a row interval is immaterial. Replay (the contract's row
@@ -54,24 +44,4 @@ def with_midpoint_force(campaign):
             runs.append(run)
             continue
         runs.append(replace(run, applied_force_n=force_at_step_midpoints(run.t, *samples)))
-    return Campaign(runs)
-
-
-def with_midpoint_row_force(campaign):
-    """The campaign with every run's applied force taken at its rows' step midpoints, linearly
-    interpolated between the rows' own force values (topics on one grid: the rows are the
-    force's samples, or its anti-aliased decimation)."""
-    from clutch_model.formats.bag_reader import Campaign
-
-    runs = []
-    for run in campaign.runs:
-        if run.t.size < 2:
-            runs.append(run)
-            continue
-        f = np.asarray(run.applied_force_n, float)
-        ok = np.isfinite(f)
-        if ok.sum() < 2:
-            runs.append(run)
-            continue
-        runs.append(replace(run, applied_force_n=force_at_step_midpoints(run.t, run.t[ok], f[ok])))
     return Campaign(runs)
