@@ -11,10 +11,12 @@ perturbed simulations, for selection's cluster-robust sandwich.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
 from clutch_model.diagnosis.fitting import CampaignObjective, CandidateFit, fit_candidate, search_space
+from clutch_model.plant.mechanisms import CATALOG
 from clutch_model.diagnosis.selection import ParameterSensitivity, SelectionData, TrainingSet
 
 
@@ -27,6 +29,14 @@ class CampaignContext:
     torque_scale: float
     sigma_nm: float
     bench_model: object = None     # ClutchModel: a second start at the first step
+
+    @cached_property
+    def row_interval_s(self) -> float:
+        """Median interval between the comparison rows (s)."""
+        t, rs = np.asarray(self.campaign.t, float), np.asarray(self.campaign.run_start, bool)
+        d = np.diff(t)[~rs[1:]]
+        d = d[d > 0]
+        return float(np.median(d)) if d.size else 0.0
 
 
 @dataclass
@@ -46,6 +56,41 @@ class ModelFit:
     @property
     def model(self):
         return self.fit.model
+
+    def without_mechanism(self) -> np.ndarray | None:
+        """The prediction of this fit with its own mechanism taken out and everything else (the
+        friction correction fitted with it, the causes named before) as fitted: what the fit
+        predicts without the mechanism. A candidate refitted jointly with the friction
+        correction, or from the bench friction, may gain on held-out rows through the refit
+        alone; selection names it only when its mechanism beats this twin."""
+        if self.id == "baseline":
+            return None
+        from clutch_model.prediction import predict_campaign
+
+        model = self.fit.model
+        twin = model.with_mechanisms([m for m in model.mechanisms if m.id != self.id])
+        return np.asarray(predict_campaign([twin], self.context.campaign, energy0_j=0.0).torque_nm)[0]
+
+    @property
+    def below_resolution(self) -> str | None:
+        """Why this fit cannot name its mechanism, or None. A time parameter (unit s: a lag, a
+        delay) shorter than half the comparison rows' interval is below the data's time
+        resolution: the plant holds each row's inputs over its step, so a simulation on those
+        rows is only timed to half a row interval (the midpoint force leaves a residual timing
+        error of ~1 ms at 200 Hz: a "lag" of 0.5-1.3 ms was fitted on campaigns with nothing
+        hidden), and topics stamped on their own clocks jitter by as much."""
+        if self.id == "baseline":
+            return None
+        half_row_s = 0.5 * self.context.row_interval_s
+        ids = self.id.split("+")
+        for mech_id in ids:
+            cls = CATALOG.get(mech_id)
+            for par in getattr(cls, "parameters", ()):
+                v = self.fit.parameters.get(par.name)
+                if par.unit == "s" and isinstance(v, (int, float)) and v < half_row_s:
+                    return (f"{mech_id} {par.name} = {1e3 * v:.2g} ms is below the time resolution of the "
+                            f"data (half the {1e3 * self.context.row_interval_s:.3g} ms row interval)")
+        return None
 
     def predict(self, data: SelectionData = None) -> np.ndarray:
         return self.fit.predicted
