@@ -12,7 +12,7 @@ split — CPU seconds of each pipeline stage (decode + grid, simulate, CSV), eac
 thread — is printed for the shortest campaign (``--split``: for every campaign).
 
 Usage: python bench/bench_scaling.py [--minutes 1 10 60] [--run-minutes 10] [--workdir DIR] [--keep]
-       [--split] [--diagnose]
+       [--split] [--diagnose] [--hidden ID:NAME=VALUE] [--seed N]
 `--diagnose` also times `clutch-sim diagnose` the same way (hook: the diagnosis' own scaling
 work decides its options; see DIAGNOSE_ARGS). Figures are upper bounds on a shared machine:
 the load average is printed with them.
@@ -73,14 +73,28 @@ def run_inputs(duration_s: float, seed: int):
     return t, force, slip, sump
 
 
-def write_campaign(out: Path, minutes: float, seed: int = 0, run_max_s: float = RUN_MAX_S) -> tuple[list, float]:
-    """Write the campaign's bags (runs of at most ``run_max_s``); returns (bag paths, seconds
-    spent writing)."""
-    from clutch_model.formats.bag_writer import RunSignals, TopicSeries, write_run_bag
+def hidden_model(spec: str | None):
+    """RC-1, or RC-1 with one hidden mechanism: ``ID:NAME=VALUE[,NAME=VALUE]``, e.g.
+    ``actuator_lag:tau_s=0.03``."""
+    from clutch_model.plant.mechanisms import make_mechanism
     from clutch_model.plant.params import load_model
-    from clutch_model.plant.simulate import simulate
 
     model = load_model(None)
+    if not spec:
+        return model
+    mech_id, _, values = spec.partition(":")
+    kw = {k: float(v) for k, v in (item.split("=", 1) for item in values.split(",") if item)}
+    return model.with_mechanisms([make_mechanism(mech_id, **kw)])
+
+
+def write_campaign(out: Path, minutes: float, seed: int = 0, run_max_s: float = RUN_MAX_S,
+                   hidden: str | None = None) -> tuple[list, float]:
+    """Write the campaign's bags (runs of at most ``run_max_s``; the true clutch RC-1, or RC-1
+    with the ``hidden`` mechanism); returns (bag paths, seconds spent writing)."""
+    from clutch_model.formats.bag_writer import RunSignals, TopicSeries, write_run_bag
+    from clutch_model.plant.simulate import simulate
+
+    model = hidden_model(hidden)
     total_s = minutes * 60.0
     n_runs = max(1, int(np.ceil(total_s / run_max_s - 1e-9)))
     run_s = total_s / n_runs
@@ -178,6 +192,9 @@ def main(argv=None) -> int:
     ap.add_argument("--keep", action="store_true", help="keep the campaigns and outputs")
     ap.add_argument("--split", action="store_true", help="in-process stage split for every campaign")
     ap.add_argument("--diagnose", action="store_true", help="also time `clutch-sim diagnose` on each campaign")
+    ap.add_argument("--hidden", default=None, metavar="ID:NAME=VALUE",
+                    help="a mechanism hidden in the true clutch, e.g. actuator_lag:tau_s=0.03 (default: none)")
+    ap.add_argument("--seed", type=int, default=0, help="campaign seed (default %(default)s)")
     args = ap.parse_args(argv)
 
     work = Path(args.workdir) if args.workdir else Path(tempfile.mkdtemp(prefix="bench_scaling-"))
@@ -196,7 +213,8 @@ def main(argv=None) -> int:
             camp = work / f"campaign_{minutes:g}min"
             if camp.exists():
                 shutil.rmtree(camp)
-            bags, t_write = write_campaign(camp, minutes, run_max_s=60.0 * args.run_minutes)
+            bags, t_write = write_campaign(camp, minutes, seed=args.seed, run_max_s=60.0 * args.run_minutes,
+                                           hidden=args.hidden)
             sim_s = minutes * 60.0
             cmd = exe + ["replay", "--bag", *map(str, bags), "--out", str(camp / "replay.csv")]
             wall, cpu, rss, rc, last = timed_process(cmd, env)
