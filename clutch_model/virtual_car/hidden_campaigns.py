@@ -376,9 +376,10 @@ class CheckResult:
 
     @property
     def gain_holds(self) -> bool | None:
-        """Where a cause is named, the extended model beats the calibrated one on unseen runs
-        against the true torque; None when nothing is named."""
-        if not self.named:
+        """Where a cause is named, or an extension beyond the catalog is claimed (`discovered`),
+        the extended model beats the calibrated one on unseen runs against the true torque;
+        None when nothing is named."""
+        if not self.named and self.verdict != "discovered":
             return None
         return bool(self.held_out_gain_pct > 0.0)
 
