@@ -85,7 +85,7 @@ def test_controller_process_closes_the_loop(domain_id, tmp_path):
         host.close()
         proc.send_signal(subprocess.signal.SIGINT)
         try:
-            assert proc.wait(timeout=10) == 0
+            assert proc.wait(timeout=60) == 0     # generous: a loaded machine shuts rclpy down slowly
         finally:
             if proc.poll() is None:
                 proc.kill()
