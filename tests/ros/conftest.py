@@ -8,6 +8,7 @@ import random
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -79,6 +80,29 @@ class NodeProcess:
                 raise AssertionError(f"node did not stop on {sig!r} within {timeout} s")
         self._log.close()
         return self.proc.returncode
+
+
+class StderrLines:
+    """A subprocess' stderr read line by line as it comes, on a daemon thread (a line such as
+    ``record``'s ready line is the event a test waits for)."""
+
+    def __init__(self, proc: subprocess.Popen):
+        self.lines: list = []
+        self._thread = threading.Thread(target=self._read, args=(proc,), daemon=True)
+        self._thread.start()
+
+    def _read(self, proc):
+        for line in iter(proc.stderr.readline, ""):
+            self.lines.append(line)
+
+    def has(self, text: str) -> bool:
+        return any(text in line for line in self.lines)
+
+    def text(self, join_timeout_s: float | None = None) -> str:
+        """What was read; with ``join_timeout_s``, first wait that long for the end of the stream."""
+        if join_timeout_s is not None:
+            self._thread.join(timeout=join_timeout_s)
+        return "".join(self.lines)
 
 
 class Client:

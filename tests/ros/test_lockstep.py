@@ -9,7 +9,7 @@ import sys
 import numpy as np
 import pytest
 
-from .conftest import Io, NodeProcess, stamp_ns, subprocess_env, write_test_bag, REPO
+from .conftest import Io, NodeProcess, StderrLines, stamp_ns, subprocess_env, write_test_bag, REPO
 
 pytestmark = pytest.mark.ros
 
@@ -181,7 +181,6 @@ def test_record_process_records_play_clock_losslessly(client, domain_id, tmp_pat
     drives a sim-time node: every step's clutch_state is in the bag (none lost), nothing is
     logged before the data starts (no 1970 log times), and Ctrl-C leaves a complete bag."""
     import signal
-    import threading
 
     from rosbags.highlevel import AnyReader
 
@@ -197,26 +196,19 @@ def test_record_process_records_play_clock_losslessly(client, domain_id, tmp_pat
     rec = subprocess.Popen([sys.executable, "-m", "clutch_sim.cli", "record", "--out", str(out), "--namespace", "/rigR",
                             "--use-sim-time"], env=env, cwd=str(REPO), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                            text=True)
-    err_lines: list = []      # the recorder's stderr, read as it comes (its ready line is the event)
-
-    def read_stderr():
-        for line in iter(rec.stderr.readline, ""):
-            err_lines.append(line)
-
-    reader = threading.Thread(target=read_stderr, daemon=True)
-    reader.start()
+    err = StderrLines(rec)    # the recorder's stderr, read as it comes (its ready line is the event)
     data_topics = [f"/rigR/{name}" for name in ("clutch_torque", "pack_temperature", "clutch_state")]
 
     def recorder_ready():
         # the recorder's own subscriptions matched the node's publishers (its ready line), and
         # the recorder's subscriptions on every output are in the graph (what the node's
         # publishers discover, too)
-        return (any(READY_LINE in line for line in err_lines)
+        return (err.has(READY_LINE)
                 and all(client.node.count_subscribers(t) >= 1 and client.node.count_publishers(t) >= 1
                         for t in data_topics))
 
     try:
-        assert client.spin_until(recorder_ready, 120.0), "".join(err_lines) + node.log()
+        assert client.spin_until(recorder_ready, 120.0), err.text() + node.log()
         play = subprocess.run([sys.executable, "-m", "clutch_sim.cli", "play", "--bag", str(bag), "--clock",
                                "--namespace", "/rigR"], env=env, cwd=str(REPO), capture_output=True, text=True,
                               timeout=300)
@@ -224,8 +216,7 @@ def test_record_process_records_play_clock_losslessly(client, domain_id, tmp_pat
         client.spin_for(1.0)
         rec.send_signal(signal.SIGINT)
         rec.wait(timeout=60)
-        reader.join(timeout=10)
-        rec_err = "".join(err_lines)
+        rec_err = err.text(join_timeout_s=10)
     finally:
         if rec.poll() is None:
             rec.kill()

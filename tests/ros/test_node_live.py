@@ -10,13 +10,12 @@ import signal
 import subprocess
 import sys
 import textwrap
-import threading
 import time
 
 import numpy as np
 import pytest
 
-from .conftest import REPO, Io, NodeProcess, stamp_ns, subprocess_env, write_test_bag
+from .conftest import REPO, Io, NodeProcess, StderrLines, stamp_ns, subprocess_env, write_test_bag
 
 pytestmark = pytest.mark.ros
 
@@ -414,22 +413,15 @@ def test_realtime_play_and_record(io1, domain_id, tmp_path):
     play = None
     from clutch_sim_ros.record import READY_LINE
 
-    err_lines: list = []      # the recorder's stderr, read as it comes (its ready line is the event)
-
-    def read_stderr():
-        for line in iter(rec.stderr.readline, ""):
-            err_lines.append(line)
-
-    reader = threading.Thread(target=read_stderr, daemon=True)
-    reader.start()
+    err = StderrLines(rec)    # the recorder's stderr, read as it comes (its ready line is the event)
     try:
         # the recorder's own subscriptions matched the node's publishers (its ready line: under
         # load, the graph can show the recorder long before the node's writers have matched it,
         # and 1 s of data played before that is lost to it) and its subscription is in the graph
         n0 = io1.client.node.count_subscribers("/rig1/clutch_state")
-        assert io1.client.spin_until(lambda: any(READY_LINE in line for line in err_lines)
+        assert io1.client.spin_until(lambda: err.has(READY_LINE)
                                      and io1.client.node.count_subscribers("/rig1/clutch_state") > n0, 120.0), \
-            "".join(err_lines)
+            err.text()
         io1.client.spin_for(0.5)
         io1.states.clear()
         play = subprocess.Popen([sys.executable, "-m", "clutch_sim.cli", "play", "--bag", str(bag), "--namespace",
@@ -441,8 +433,7 @@ def test_realtime_play_and_record(io1, domain_id, tmp_path):
         rec.send_signal(signal.SIGINT)            # Ctrl-C ends a recording cleanly (exit 0, file kept)
         assert io1.client.spin_until(lambda: rec.poll() is not None, 60.0), "record did not stop"
         rec_out = rec.stdout.read()
-        reader.join(timeout=30)
-        rec_err = "".join(err_lines)
+        rec_err = err.text(join_timeout_s=30)
     finally:
         for proc in (rec, play):
             if proc is not None and proc.poll() is None:
