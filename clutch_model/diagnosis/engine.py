@@ -36,6 +36,7 @@ from clutch_model.plant.simulate import SimResult
 from clutch_model.diagnosis import features as F
 from clutch_model.diagnosis.candidates import CampaignContext, MechanismCandidate, baseline_fit
 from clutch_model.diagnosis.input_hold import with_midpoint_force
+from clutch_model.diagnosis.lockup import without_locked_torque
 from clutch_model.diagnosis.fitting import CANDIDATE_IDS, CandidateFit, fit_candidate
 from clutch_model.diagnosis.noise_model import fit_noise_model
 from clutch_model.diagnosis.selection import Selection, SelectionData, select_causes
@@ -59,6 +60,14 @@ DISCOVER_AFTER = ("unexplained", "none")
 # model of the held-out tests can be fitted to (interleaved NaN rows would break every history)
 MEASURED_TIME_GRID_HZ = 1.0
 SAMPLE_BUDGET_S = DEFAULT_BUDGET_S
+# lock phases: rows within LOCK_PAD_S of one are left out (the detection's edges; next to a lock
+# the slip is small and the model's torque takes the sign of the slip sensor's noise; the plant's
+# film and the decimation filter settle there); a named delay / sensor lag widens the tail after
+# each phase (``lock_tail_needed_s``) and the campaign is diagnosed again, at most
+# LOCK_TAIL_ROUNDS times, while the tail grows by more than LOCK_TAIL_SLACK_S
+LOCK_PAD_S = 0.2
+LOCK_TAIL_ROUNDS = 2
+LOCK_TAIL_SLACK_S = 0.02
 
 
 def diagnosis_candidate_ids() -> list:
@@ -109,30 +118,15 @@ def choose_held_out(names: list, runs=None) -> list:
     return [names[k] for k in picks]
 
 
-def without_locked_rows(campaign: Campaign) -> tuple:
+def without_locked_rows(campaign: Campaign, with_results: bool = False) -> tuple:
     """The campaign with the measured torque NaN on locked rows (the driveline, not the
-    clutch's capacity, sets it there) -> (campaign, locked mask). Uses the lock-up detection
-    from the data when the project has it (diagnosis.lockup), else the model's lock tolerance
-    on the measured slip."""
-    try:
-        from clutch_model.diagnosis.lockup import without_locked_torque
-    except ImportError:
-        without_locked_torque = None
+    clutch's capacity, sets it there) -> (campaign, locked mask), plus the LockupResult per run
+    when ``with_results``: lock phases found from the data (diagnosis.lockup), padded
+    ``LOCK_PAD_S`` on both sides."""
     before = np.isfinite(campaign.torque_measured)
-    if without_locked_torque is not None:
-        campaign, _ = without_locked_torque(campaign)
-        return campaign, before & ~np.isfinite(campaign.torque_measured)
-    from dataclasses import replace
-
-    runs, locked = [], []
-    for r in campaign.runs:
-        lk = np.abs(r.slip_speed_rad_s) < 1e-3
-        tq = r.torque_measured_nm
-        if tq is not None and lk.any():
-            tq = np.where(lk, np.nan, tq)
-        runs.append(replace(r, torque_measured_nm=tq))
-        locked.append(lk)
-    return Campaign(runs), before & np.concatenate(locked)
+    campaign, results = without_locked_torque(campaign, pad_s=LOCK_PAD_S)
+    locked = before & ~np.isfinite(campaign.torque_measured)
+    return (campaign, locked, results) if with_results else (campaign, locked)
 
 
 @dataclass
@@ -219,15 +213,19 @@ def residual_library(campaign: Campaign, sim: SimResult, torque: np.ndarray):
 
 
 def ripple_columns(campaign: Campaign, torque: np.ndarray):
-    """Once-per-revolution columns (additive and torque-proportional sin/cos of the slip
-    angle), fitted per run by per_run_structure_test (the phase differs from run to run)."""
+    """Columns whose coefficients differ from run to run, fitted per run by
+    per_run_structure_test: once-per-revolution ripple (additive and torque-proportional sin/cos
+    of the slip angle; the phase differs from run to run) and the friction level of the run
+    (the model's torque: lining or oil state of the day, which no input predicts from one run
+    to the next)."""
     angle = np.zeros(campaign.t.size)
     for _, sl in campaign.slices():
         t = campaign.t[sl]
         angle[sl] = np.cumsum(campaign.slip[sl] * np.diff(t, prepend=t[0]))
     tq = torque / (np.nanstd(torque) or 1.0)
-    names = ["sin slip angle", "cos slip angle", "torque x sin slip angle", "torque x cos slip angle"]
-    return names, np.column_stack([np.sin(angle), np.cos(angle), tq * np.sin(angle), tq * np.cos(angle)])
+    names = ["sin slip angle", "cos slip angle", "torque x sin slip angle", "torque x cos slip angle",
+             "friction level of the run (torque)"]
+    return names, np.column_stack([np.sin(angle), np.cos(angle), tq * np.sin(angle), tq * np.cos(angle), tq])
 
 
 def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held_out=None,
@@ -276,11 +274,112 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
         say(plan.describe())
     timings["prepare (regrid, decimate)"] = time.perf_counter() - tick
     campaign = smooth_sump(campaign)
-    # lock-up phases (found from the slip data, diagnosis.lockup): the driveline sets the torque
-    campaign, locked = without_locked_rows(campaign)
+    # lock-up phases (found from the data, diagnosis.lockup): the driveline sets the torque
+    campaign, locked, lock_results = without_locked_rows(campaign, with_results=True)
     # each topic's raw samples served the regridding and the lock-up detection; nothing after
     # reads them (an hour at 1 kHz: ~0.5 GB)
     campaign = Campaign([replace(r, samples={}) for r in campaign.runs])
+    args = dict(nominal=nominal, bench_model=bench_model, held_out=held_out, candidates=candidates,
+                calibrate=calibrate, say=say, emit=emit, discover=discover, fit_executor=fit_executor,
+                sample_budget_s=sample_budget_s, plan=plan, timings=timings, tick=tick, bench_info=bench_info)
+    d = _diagnose_masked(campaign, locked, **args)
+    # a named delay or torque-sensor lag carries each lock phase's driveline torque into the
+    # measured torque after it, where no clutch model can follow: those rows are left out too,
+    # and the campaign diagnosed again, until the tail covers what the final model names
+    tail = 0.0
+    for _ in range(LOCK_TAIL_ROUNDS):
+        need = _lock_tail_of(d)
+        if not locked.any() or need <= tail + LOCK_TAIL_SLACK_S:
+            break
+        tail = need + LOCK_TAIL_SLACK_S
+        wider, more = with_lock_tail(campaign, lock_results, tail)
+        which = ", ".join(c["id"] for c in d.causes) or "closest " + " / ".join(d.selection.closest)
+        say(f"lock phases: {which} carries the driveline torque {tail:.3f} s past each lock phase: "
+            f"leaving those rows out too and diagnosing again")
+        d = _diagnose_masked(wider, locked | more, **args)
+        d.calibration_info = {**d.calibration_info, "lock_tail_s": tail}
+    return d
+
+
+def lock_tail_needed_s(causes) -> float:
+    """How long after a lock phase the measured torque still carries its driveline torque under
+    the named causes: a transport delay (its upper 95 % bound) plus three torque-sensor time
+    constants (the upper bound of the time constant)."""
+    need = 0.0
+    for c in causes:
+        hi = {k: float(v[1]) for k, v in (c.get("parameters_ci95") or {}).items()
+              if isinstance(v, (list, tuple)) and len(v) == 2 and math.isfinite(float(v[1]))}
+        vals = c.get("parameters") or {}
+        if c["id"] == "transport_delay":
+            need += max(hi.get("delay_s", 0.0), float(vals.get("delay_s", 0.0)))
+        elif c["id"] == "torque_sensor_lag":
+            need += 3.0 * max(hi.get("tau_s", 0.0), float(vals.get("tau_s", 0.0)))
+    return float(need)
+
+
+def with_timing_resolution(causes: list, half_row_s: float) -> list:
+    """Widen the 95 % interval of every time parameter (unit s: a lag, a delay) by half the
+    comparison rows' interval on each side, and make every interval hold the value reported.
+    The statistical interval says how well the data pin the parameter down on the simulation
+    grid; the grid itself times the model only to half a row (the plant holds each row's
+    inputs over its step), an error the statistics do not see (a 0.3 s delay read as
+    0.2978 [0.2977, 0.2980] on 200 Hz rows)."""
+    for c in causes:
+        units = {p.name: p.unit for p in CATALOG[c["id"]].parameters} if c["id"] in CATALOG else {}
+        ci = dict(c.get("parameters_ci95") or {})
+        for k, v in (c.get("parameters") or {}).items():
+            lohi = ci.get(k)
+            if not (isinstance(lohi, (list, tuple)) and len(lohi) == 2):
+                continue
+            lo, hi = float(lohi[0]), float(lohi[1])
+            if not (math.isfinite(lo) and math.isfinite(hi)):
+                continue
+            if units.get(k) == "s" and half_row_s > 0:
+                lo, hi = max(lo - half_row_s, 0.0), hi + half_row_s
+            ci[k] = [min(lo, float(v)), max(hi, float(v))]
+        c["parameters_ci95"] = ci
+    return causes
+
+
+def _lock_tail_of(d: "Diagnosis") -> float:
+    """The lock tail a diagnosis asks for: its named causes' (``lock_tail_needed_s``), or when
+    it is ``unexplained`` because lookalikes could not be told apart, the longest of theirs
+    (the first selection step's fits; a lock tail the narrower mask left in may be what made
+    them alike)."""
+    if d.causes:
+        return lock_tail_needed_s(d.causes)
+    if d.cause_id != "unexplained" or d.selection is None:
+        return 0.0
+    fitted = {sc.id: sc.fitted for sc in d.scores}
+    alike = [{"id": cid, "parameters": fitted[cid].parameters} for cid in d.selection.closest if cid in fitted]
+    return max((lock_tail_needed_s([c]) for c in alike), default=0.0)
+
+
+def with_lock_tail(campaign: Campaign, lock_results: list, tail_s: float) -> tuple:
+    """(campaign with the measured torque NaN also ``tail_s`` past each lock phase's padded end,
+    the rows newly left out)."""
+    runs, more = [], []
+    for run, res in zip(campaign.runs, lock_results):
+        extra = np.zeros(run.t.size, bool)
+        for a, b in res.segments:
+            extra |= (run.t > b) & (run.t <= b + LOCK_PAD_S + tail_s)
+        if run.torque_measured_nm is not None:
+            extra &= np.isfinite(run.torque_measured_nm)
+            if extra.any():
+                run = replace(run, torque_measured_nm=np.where(extra, np.nan, run.torque_measured_nm))
+        else:
+            extra[:] = False
+        runs.append(run)
+        more.append(extra)
+    return Campaign(runs), np.concatenate(more) if more else np.zeros(0, bool)
+
+
+def _diagnose_masked(campaign: Campaign, locked: np.ndarray, *, nominal, bench_model, held_out, candidates,
+                     calibrate, say, emit, discover, fit_executor, sample_budget_s, plan, timings,
+                     tick, bench_info) -> "Diagnosis":
+    """Stages 1 (split) to 4 of ``diagnose_campaign`` on a campaign whose locked rows are
+    already NaN."""
+    timings = dict(timings)
     names = campaign.names
     if not np.isfinite(campaign.torque_measured).any():
         raise DataError("the bags have no /clutch/measured_torque: nothing to diagnose against")
@@ -438,6 +537,7 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
             if m is not None:
                 c["parameters"] = {k: float(v) for k, v in m.values.items()
                                    if isinstance(v, (int, float)) and k in c["parameters"]}
+        with_timing_resolution(causes, 0.5 * ctx.row_interval_s)
         cause_params = dict(causes[0]["parameters"])
         cause_ci = dict(causes[0]["parameters_ci95"])
         if "friction_degradation" in final_mechs:

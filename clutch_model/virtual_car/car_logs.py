@@ -724,13 +724,45 @@ def true_sensor_torque_at(sidecar: dict, t_s) -> np.ndarray:
     return out
 
 
+def measurement_tail_s(spec: "CarLogSpec") -> float:
+    """How long the sensor keeps showing a lock phase's driveline torque after it ends under the
+    spec's true measurement mechanisms and effects: the transport delay plus three torque-sensor
+    time constants (catalog torque_sensor_lag, the torque_sensor_lowpass effect)."""
+    tail = 0.0
+    for m in spec.mechanisms:
+        if m["id"] == "transport_delay":
+            tail += float(m.get("delay_s", 0.0))
+        elif m["id"] == "torque_sensor_lag":
+            tail += 3.0 * float(m.get("tau_s", 0.0))
+    lowpass = spec.effect_values("torque_sensor_lowpass")
+    if lowpass is not None:
+        tail += 3.0 * float(lowpass["tau_s"])
+    return tail
+
+
+def near_true_lock(sidecar: dict, t_s, lock_pad_s: float = 0.1, tail_s: float = 0.0) -> np.ndarray:
+    """Times (s from the bag's first message) where the noise-free sensor reading is set by the
+    driveline, not the clutch: inside a true lock phase widened by ``lock_pad_s`` on both sides
+    and by ``tail_s`` more after it (``measurement_tail_s``: the sensor shows the lock's torque
+    that much later)."""
+    t_s = np.asarray(t_s, float)
+    ft, fl = sidecar["fine_t_s"], sidecar["fine_locked"].astype(float)
+    near = np.interp(t_s, ft, fl) > 0
+    if not fl.any():
+        return near
+    step = 0.005
+    for d in np.arange(-lock_pad_s, lock_pad_s + tail_s + step / 2, step):
+        near |= np.interp(t_s - d, ft, fl) > 0
+    return near
+
+
 def score_against_truth(model: ClutchModel, runs, truth_dir, rate_hz: float = 1000.0,
-                        lock_pad_s: float = 0.1) -> dict:
+                        lock_pad_s: float = 0.1, tail_s: float = 0.0) -> dict:
     """Held-out scoring against the true torque: ``model`` simulated where the measurement is
     (diagnosis.measured_time.simulate_at_measured_times) on ``runs`` (read_bags output), its
     predicted measurement compared with ``torque_true_nm`` of ``truth_dir/<run>.npz`` at the
-    torque stamps, samples within ``lock_pad_s`` of a true lock phase left out (the driveline
-    sets the torque there). Returns {"rmse_nm": overall, "runs": {name: rmse}, "samples": n}."""
+    torque stamps, samples within ``lock_pad_s`` of a true lock phase, or ``tail_s`` after it,
+    left out (the driveline sets the torque there; ``near_true_lock``). Returns {"rmse_nm": overall, "runs": {name: rmse}, "samples": n}."""
     from clutch_model.diagnosis.measured_time import simulate_at_measured_times
 
     mts = simulate_at_measured_times(model, runs, rate_hz=rate_hz)
@@ -745,11 +777,7 @@ def score_against_truth(model: ClutchModel, runs, truth_dir, rate_hz: float = 10
         if truth.size != sl.stop - sl.start:
             raise DataError(f"truth sidecar of {name} does not match its bag ({truth.size} torque samples "
                             f"vs {sl.stop - sl.start})")
-        ft, fl = side["fine_t_s"], side["fine_locked"].astype(float)
-        near_lock = np.interp(cmp.t[sl], ft, fl) > 0
-        if lock_pad_s > 0 and fl.any():
-            for d in (-lock_pad_s, lock_pad_s):
-                near_lock |= np.interp(cmp.t[sl] + d, ft, fl) > 0
+        near_lock = near_true_lock(side, cmp.t[sl], lock_pad_s, tail_s)
         ok = cmp.valid[sl] & ~near_lock
         err = cmp.model[sl][ok] - truth[ok]
         per[name] = float(np.sqrt(np.mean(err ** 2))) if err.size else float("nan")

@@ -38,6 +38,7 @@ import numpy as np
 
 from clutch_model.plant.mechanisms import CATALOG
 from clutch_model.virtual_car.car_logs import (EFFECTS, CarLogSpec, load_truth_sidecar,
+                                               measurement_tail_s, near_true_lock,
                                                score_against_truth, synthesize_car_logs,
                                                true_sensor_torque_at, write_car_logs)
 from clutch_model.virtual_car.signals import TopicClock, make_noise
@@ -314,10 +315,11 @@ def run_clutch_sim(args: list, timeout_s: float | None = None) -> tuple:
     return rc, err[-600:], wall, cpu
 
 
-def score_replay_csv(csv_path, truth_dir, bags: set, lock_pad_s: float = 0.1) -> dict:
+def score_replay_csv(csv_path, truth_dir, bags: set, lock_pad_s: float = 0.1, tail_s: float = 0.0) -> dict:
     """RMSE of a replay CSV's ``torque_sim`` against the noise-free true torque
     (``true_sensor_torque_at``) on the rows of ``bags``, rows within ``lock_pad_s`` of a true
-    lock phase left out (the driveline sets the torque there)."""
+    lock phase, or ``tail_s`` after it, left out (the driveline sets the sensor's reading there:
+    ``car_logs.near_true_lock``, ``car_logs.measurement_tail_s``)."""
     rows = {}
     with open(csv_path, newline="") as fh:
         for r in csv.DictReader(fh):
@@ -328,10 +330,7 @@ def score_replay_csv(csv_path, truth_dir, bags: set, lock_pad_s: float = 0.1) ->
         t, sim = np.array(vals).T
         side = load_truth_sidecar(Path(truth_dir) / f"{bag}.npz")
         truth = true_sensor_torque_at(side, t)
-        ft, fl = side["fine_t_s"], side["fine_locked"].astype(float)
-        near = np.interp(t, ft, fl) > 0
-        for d in (-lock_pad_s, lock_pad_s):
-            near |= np.interp(t + d, ft, fl) > 0
+        near = near_true_lock(side, t, lock_pad_s, tail_s)
         ok = np.isfinite(truth) & np.isfinite(sim) & ~near
         err = sim[ok] - truth[ok]
         per[bag] = float(np.sqrt(np.mean(err ** 2))) if err.size else float("nan")
@@ -437,7 +436,8 @@ def check_campaign(camp: HiddenCampaign, work_dir=None, mc_samples: int | None =
         if rc != 0:
             res.error = f"replay {name}: {err.splitlines()[-1] if err else rc}"
             continue
-        res.replay_rmse_nm[label] = score_replay_csv(out_csv, camp.truth_dir, unseen)["rmse_nm"]
+        res.replay_rmse_nm[label] = score_replay_csv(out_csv, camp.truth_dir, unseen,
+                                                     tail_s=measurement_tail_s(camp.spec))["rmse_nm"]
     res.wall_s["replay"], res.cpu_s["replay"] = time.perf_counter() - t0, cpu
     if len(res.replay_rmse_nm) == 2:
         res.held_out_gain_pct = _gain(res.replay_rmse_nm["calibrated"], res.replay_rmse_nm["extended"])
@@ -448,7 +448,8 @@ def check_campaign(camp: HiddenCampaign, work_dir=None, mc_samples: int | None =
         t0, c0 = time.perf_counter(), time.process_time()
         runs = read_bags(camp.seen_bags + camp.unseen_bags)
         for label, name in (("calibrated", "calibrated_model.yaml"), ("extended", "extended_model.yaml")):
-            sc = score_against_truth(load_model(diag / name), runs, camp.truth_dir)
+            sc = score_against_truth(load_model(diag / name), runs, camp.truth_dir,
+                                     tail_s=measurement_tail_s(camp.spec))
             n = sc["run_samples"]
             use = [r for r in unseen if n.get(r, 0) > 0]
             sq = sum(sc["runs"][r] ** 2 * n[r] for r in use)
