@@ -499,6 +499,13 @@ def _diagnose_masked(campaign: Campaign, locked: np.ndarray, *, nominal, bench_m
         t0 = time.perf_counter()
         discovery = _discover(data, base, campaign, bench_model, say)
         timings["discovery"] = time.perf_counter() - t0
+    elif discover and sel.verdict == "named" and "friction_degradation" in sel.cause_ids:
+        # friction that falls as energy accumulates has a lookalike outside the catalog:
+        # friction that fades with the slip power and recovers (reversible). Discovery's
+        # reversible terms (no energy term) are its rival, head to head on held-out rows
+        t0 = time.perf_counter()
+        sel, discovery = _degradation_or_fade(data, base, campaign, bench_model, sel, say)
+        timings["discovery"] = time.perf_counter() - t0
 
     # -- stage 4: extend ------------------------------------------------------------------------
     cause = {"named": None, "none": "none", "unexplained": "unexplained"}[sel.verdict]
@@ -670,6 +677,57 @@ def _discover(data: SelectionData, base, campaign: Campaign, bench_model: Clutch
                          max_causes=1, refine_top=0, progress=say)
     accepted = dsel.verdict == "named" and bool(dsel.causes and dsel.causes[0].parameters)
     return DiscoveryOutcome(dsel, accepted)
+
+
+def _degradation_or_fade(data: SelectionData, base, campaign: Campaign, bench_model: ClutchModel,
+                         sel: Selection, say) -> tuple:
+    """friction_degradation (irreversible: friction falls with the energy dissipated so far)
+    against a reversible fade (friction falls with the recent slip power and recovers) found by
+    discovery without energy terms. -> (selection, discovery outcome or None). The named
+    degradation stands when discovery finds no reversible term that the selection accepts, or
+    when degradation predicts the held-out residual significantly better than it; the
+    discovered fade replaces it when it predicts significantly better; otherwise the two cannot
+    be told apart on held-out data and the verdict is ``unexplained``."""
+    from clutch_model.diagnosis.structure_test import compare_residuals
+    from clutch_model.discovery.candidate import DiscoveryCandidate
+
+    say("friction_degradation named: checking the reversible lookalike (slip-power fade) beyond the catalog")
+    from clutch_model.discovery.terms import default_library
+
+    reversible = [t for t in default_library() if "energy" not in (t.a, t.b)]
+    cand = DiscoveryCandidate(campaign, bench_model=bench_model, progress=say, library=reversible)
+    dsel = select_causes(data, base, [cand], alpha=ALPHA, min_gain_frac=NAMED_GAIN_FRAC,
+                         structure_min_gain_frac=STRUCTURE_GAIN_FRAC, plain_gain=True, intervals=False,
+                         max_causes=1, refine_top=0, progress=say)
+    found = dsel.causes[0] if dsel.verdict == "named" and dsel.causes else None
+    if found is None or not found.parameters:
+        return sel, None
+    r_deg = _sel_resid(data, sel.final)
+    r_fade = _sel_resid(data, found.fitted)
+    fade_better = compare_residuals(r_deg, r_fade, data.train_mask, data.test_mask, data.run_start, data.t)
+    deg_better = compare_residuals(r_fade, r_deg, data.train_mask, data.test_mask, data.run_start, data.t)
+    say(f"friction_degradation vs reversible fade on held-out rows: fade t = {fade_better.t_stat:.1f}, "
+        f"degradation t = {deg_better.t_stat:.1f}")
+    if deg_better.significant(ALPHA, NAMED_GAIN_FRAC, True):
+        return sel, None
+    if fade_better.significant(ALPHA, NAMED_GAIN_FRAC, True):
+        why = (f"friction_degradation predicts the held-out residual, but a reversible friction fade beyond "
+               f"the catalog predicts it better head to head (held-out t = {fade_better.t_stat:.1f}; "
+               f"degradation over the fade t = {deg_better.t_stat:.1f})")
+        return replace(sel, reason=why), DiscoveryOutcome(dsel, True)
+    why = (f"friction_degradation cannot be told apart on held-out data from a reversible friction "
+           f"fade beyond the catalog ({', '.join(found.parameters)}: held-out t = {fade_better.t_stat:.1f} "
+           f"and {deg_better.t_stat:.1f} head to head)")
+    left = {"held_out_rmse": _rmse(r_deg, data.test_mask)}
+    unexplained = Selection("unexplained", [], sel.steps, base, sel.baseline_structure, sel.remainder_structure,
+                            ["friction_degradation", "discovered"], left, why)
+    return unexplained, DiscoveryOutcome(dsel, False)
+
+
+def _sel_resid(data: SelectionData, fitted) -> np.ndarray:
+    from clutch_model.diagnosis.selection import _resid
+
+    return _resid(data, fitted)
 
 
 def _record_energy_history(model: ClutchModel, campaign: Campaign) -> None:

@@ -45,7 +45,9 @@ def test_controller_process_closes_the_loop(domain_id, tmp_path):
     sc = split_mu(rate_hz=500.0, duration_s=3.0)
     n, f0 = sc.t.size, 1000.0
     log = open(tmp_path / "controller.log", "w")
-    proc = subprocess.Popen([sys.executable, str(REPO / "examples/closed_loop/slip_controller_node.py"),
+    # -X faulthandler: a controller that does not exit after SIGINT is sent SIGABRT below and
+    # its threads' Python stacks land in its log (the failure message shows them)
+    proc = subprocess.Popen([sys.executable, "-X", "faulthandler", str(REPO / "examples/closed_loop/slip_controller_node.py"),
                              "--ros-args", "-r", "__ns:=/cl", "-p", "sample_time_s:=0.002"],
                             env=subprocess_env(domain_id), cwd=str(REPO), stdout=log, stderr=subprocess.STDOUT)
     host = Client(domain_id)
@@ -85,7 +87,15 @@ def test_controller_process_closes_the_loop(domain_id, tmp_path):
         host.close()
         proc.send_signal(subprocess.signal.SIGINT)
         try:
-            assert proc.wait(timeout=60) == 0     # generous: a loaded machine shuts rclpy down slowly
+            try:
+                rc = proc.wait(timeout=60)     # generous: a loaded machine shuts rclpy down slowly
+            except subprocess.TimeoutExpired:
+                proc.send_signal(subprocess.signal.SIGABRT)
+                proc.wait(timeout=30)
+                log.flush()
+                stacks = (tmp_path / "controller.log").read_text()[-6000:]
+                pytest.fail(f"the controller did not exit within 60 s of SIGINT; its stacks:\n{stacks}")
+            assert rc == 0
         finally:
             if proc.poll() is None:
                 proc.kill()
