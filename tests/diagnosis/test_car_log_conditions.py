@@ -209,3 +209,18 @@ def test_magnitudes_come_from_the_hidden_seed(tmp_path):
     lo, hi = CATALOG["spring_preload"].virtual_car.visible
     assert lo <= a["spring_preload"] <= hi
     assert np.isfinite(list(a.values())).all()
+
+
+@pytest.mark.slow
+def test_slip_power_fade_is_not_named_friction_degradation(tmp_path):
+    """A reversible slip-power fade under held torque noise (seed 1, full size: 6 seen runs x 8 s)
+    was named friction_degradation before the degradation-vs-fade check (engine
+    ._degradation_or_fade): its rival, discovery without energy terms, now predicts the held-out
+    residual better head to head -> discovered, and the gain holds on the unseen bags."""
+    camp = make_hidden_campaign("slip_power_fade", "held", 1, tmp_path / "campaign", magnitude_seed=HIDDEN_SEED)
+    res = check_campaign(camp, tmp_path, mc_samples=MC_SAMPLES, stamps=False)
+    what = f"diagnose said {res.named_label}: {(res.report or {}).get('cause', {}).get('evidence', res.error)}"
+    assert "friction_degradation" not in res.named, what
+    assert res.judgement == "ok", what
+    if res.verdict == "discovered":
+        assert res.replay_rmse_nm["extended"] < res.replay_rmse_nm["calibrated"], res.replay_rmse_nm
