@@ -538,15 +538,36 @@ def _cross_fit_per_run(r, Xs, rows_all, lab, run_id, run_start, nm, t):
 
 def per_run_structure_test(residual: np.ndarray, X: np.ndarray, train_mask, test_mask, run_start, t,
                            feature_names=None, alpha: float = ALPHA, min_gain_frac: float = MIN_GAIN_FRAC,
-                           block_s: float = BLOCK_S, max_order: int = DEFAULT_MAX_ORDER) -> StructureResult:
+                           block_s: float = BLOCK_S, max_order: int = DEFAULT_MAX_ORDER,
+                           run_offset: bool = True) -> StructureResult:
     """Structure the inputs predict up to per-run coefficients (a once-per-revolution ripple
     whose phase differs from run to run: sin and cos of the slip angle, with coefficients of
-    each run's own). Within each run, each block is predicted from a GLS fit of the
-    columns X on that run's *other* blocks (cross-fitting; rows whose AR history reaches into
-    the predicted block are left out of its fit), and the correction is then tested like any
-    candidate against the noise model fitted on the training rows."""
+    each run's own; a friction level of the run: the torque). Within each run, each block is
+    predicted from a GLS fit of the columns X on that run's *other* blocks (cross-fitting; rows
+    whose AR history reaches into the predicted block are left out of its fit), and the
+    correction is then tested like any candidate against the noise model fitted on the training
+    rows.
+
+    ``run_offset``: both sides carry a per-run offset and slope in time, cross-fitted the same
+    way, and the test is of what X adds to them. Slow sensor drift (a 10 s random walk over 8 s
+    runs) is close to an offset and slope per run, which a mostly positive torque column would
+    otherwise take for a friction level (drift / none / 43 read `unexplained` at t = 7.9 with
+    the torque column alone, 8.3 with an offset only)."""
     r = np.asarray(residual, float)
     X = input_band(X, t, run_start)
+    if run_offset:
+        tt = np.asarray(t, float)
+        starts = np.flatnonzero(np.asarray(run_start, bool))
+        t_in_run = tt - tt[starts][np.cumsum(run_start) - 1]
+        drift = np.column_stack([np.ones(r.size), t_in_run / max(float(np.nanmax(t_in_run)), 1e-9)])
+        null = per_run_structure_test(r, drift, train_mask, test_mask, run_start, t,
+                                      block_s=block_s, max_order=max_order, run_offset=False).prediction
+        both = per_run_structure_test(r, np.column_stack([drift, X]), train_mask, test_mask, run_start,
+                                      t, block_s=block_s, max_order=max_order, run_offset=False).prediction
+        cmp = candidate_test(r - null, both - null, train_mask, test_mask, run_start, t, block_s=block_s,
+                             max_order=max_order)
+        return StructureResult(structured=cmp.significant(alpha, min_gain_frac, noise_units=True), comparison=cmp,
+                               coefficients=None, feature_names=list(feature_names or []), prediction=both - null)
     ok_train = train_mask & np.isfinite(r)
     # every run is cross-fitted (the training runs too, so the noise model is fitted to what
     # the per-run model leaves there), twice: the second pass whitens with that noise model

@@ -178,8 +178,8 @@ def test_per_run_friction_level_is_found_within_each_run(kind):
     predicted by no input across runs (test above), but within a run its level is pinned down
     by the run's other blocks: the per-run columns predict the held-out runs' residual.
     Measured: found in 16 of 18 (noise class x seed); missed under band-limited noise seed 1
-    (t = 0.8: whitening a 10 Hz band limit leaves little of a slow level) and white + drift seed
-    2 (t = 30, but the drift's plain mean square on the held-out runs is not lower)."""
+    (t = 2.2: whitening a 10 Hz band limit leaves little of a slow level) and white + drift seed
+    1 (t = 19, but the drift's plain mean square on the held-out runs is not lower)."""
     found = 0
     for seed in SEEDS:
         d, names, X, train, test = _case(seed, 200)
@@ -190,6 +190,9 @@ def test_per_run_friction_level_is_found_within_each_run(kind):
                                      d["run_start"], d["t"])
         if res.structured:
             found += 1
-            # what it predicts on the held-out runs is the level
-            assert np.corrcoef(res.prediction[test], (level * d["torque"])[test])[0, 1] > 0.8, (kind, seed)
+            # what it predicts on the held-out runs is the level, beyond an offset per run (the
+            # test's null model carries one)
+            effect = level * d["torque"]
+            beyond = effect - np.bincount(run, effect)[run] / np.bincount(run)[run]
+            assert np.corrcoef(res.prediction[test], beyond[test])[0, 1] > 0.6, (kind, seed)
     assert found >= len(SEEDS) - 1, (kind, found)
