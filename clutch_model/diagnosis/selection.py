@@ -240,12 +240,21 @@ def _remainder_test(data, resid, alpha, min_gain_frac, max_order):
                          feature_names=data.feature_names, alpha=alpha / tests, min_gain_frac=min_gain_frac,
                          max_order=max_order)
     if data.per_run_features is not None:
-        per_run = per_run_structure_test(resid, data.per_run_features, data.train_mask, data.test_mask,
-                                         data.run_start, data.t, feature_names=data.per_run_feature_names,
-                                         alpha=alpha / tests, min_gain_frac=min_gain_frac, max_order=max_order)
-        if per_run.structured and not res.structured or per_run.comparison.t_stat > res.comparison.t_stat:
-            if per_run.structured or not res.structured:
-                res = per_run
+        # ripple columns as they are; the run's friction level (the torque) beyond a per-run
+        # offset and slope, which slow drift resembles (structure_test.per_run_structure_test);
+        # the two share the per-run test's alpha
+        names = list(data.per_run_feature_names)
+        level = [i for i, n in enumerate(names) if n.startswith(PER_RUN_LEVEL)]
+        groups = [(cols, offset) for cols, offset in
+                  (([i for i in range(len(names)) if i not in level], False), (level, True)) if cols]
+        for cols, offset in groups:
+            per_run = per_run_structure_test(resid, data.per_run_features[:, cols], data.train_mask, data.test_mask,
+                                             data.run_start, data.t, feature_names=[names[i] for i in cols],
+                                             alpha=alpha / tests / len(groups), min_gain_frac=min_gain_frac,
+                                             max_order=max_order, run_offset=offset)
+            if per_run.structured and not res.structured or per_run.comparison.t_stat > res.comparison.t_stat:
+                if per_run.structured or not res.structured:
+                    res = per_run
     if not res.structured:
         # structure the training rows do not show: the held-out rows' noise is larger
         excess = held_out_excess_test(resid, data.train_mask, data.test_mask, data.run_start, data.t,
@@ -255,6 +264,7 @@ def _remainder_test(data, resid, alpha, min_gain_frac, max_order):
     return res
 
 
+PER_RUN_LEVEL = "friction level of the run"     # the per-run column tested beyond offset and slope
 BACKFIT_PASSES = 8
 BACKFIT_TOL = 1e-3      # a pass that lowers the training MSE by less than this fraction ends it
 BACKFIT_MIN_CUT = 1e-6  # a refit is kept when it lowers the training MSE by more than this fraction

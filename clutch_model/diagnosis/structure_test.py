@@ -539,7 +539,7 @@ def _cross_fit_per_run(r, Xs, rows_all, lab, run_id, run_start, nm, t):
 def per_run_structure_test(residual: np.ndarray, X: np.ndarray, train_mask, test_mask, run_start, t,
                            feature_names=None, alpha: float = ALPHA, min_gain_frac: float = MIN_GAIN_FRAC,
                            block_s: float = BLOCK_S, max_order: int = DEFAULT_MAX_ORDER,
-                           run_offset: bool = True) -> StructureResult:
+                           run_offset: bool = False) -> StructureResult:
     """Structure the inputs predict up to per-run coefficients (a once-per-revolution ripple
     whose phase differs from run to run: sin and cos of the slip angle, with coefficients of
     each run's own; a friction level of the run: the torque). Within each run, each block is
