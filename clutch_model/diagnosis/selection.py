@@ -240,9 +240,9 @@ def _remainder_test(data, resid, alpha, min_gain_frac, max_order):
                          feature_names=data.feature_names, alpha=alpha / tests, min_gain_frac=min_gain_frac,
                          max_order=max_order)
     if data.per_run_features is not None:
-        # ripple columns as they are; the run's friction level (the torque) beyond a per-run
-        # offset and slope, which slow drift resembles (structure_test.per_run_structure_test);
-        # the two share the per-run test's alpha
+        # ripple columns as they are; a column named PER_RUN_LEVEL (a friction level of the run,
+        # not in the diagnosis' columns: docs/diagnosis_statistics.md) beyond a per-run offset and
+        # slope, which slow drift resembles; the groups share the per-run test's alpha
         names = list(data.per_run_feature_names)
         level = [i for i, n in enumerate(names) if n.startswith(PER_RUN_LEVEL)]
         groups = [(cols, offset) for cols, offset in
