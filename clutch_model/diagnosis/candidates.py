@@ -17,7 +17,7 @@ import numpy as np
 
 from clutch_model.diagnosis.fitting import CampaignObjective, CandidateFit, fit_candidate, search_space
 from clutch_model.plant.mechanisms import CATALOG
-from clutch_model.diagnosis.selection import ParameterSensitivity, SelectionData, TrainingSet
+from clutch_model.diagnosis.selection import ParameterSensitivity, SelectionData, TrainingSet, row_interval_s
 
 
 @dataclass
@@ -33,10 +33,7 @@ class CampaignContext:
     @cached_property
     def row_interval_s(self) -> float:
         """Median interval between the comparison rows (s)."""
-        t, rs = np.asarray(self.campaign.t, float), np.asarray(self.campaign.run_start, bool)
-        d = np.diff(t)[~rs[1:]]
-        d = d[d > 0]
-        return float(np.median(d)) if d.size else 0.0
+        return row_interval_s(self.campaign.t, self.campaign.run_start)
 
 
 @dataclass

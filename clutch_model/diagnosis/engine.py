@@ -39,7 +39,7 @@ from clutch_model.diagnosis.input_hold import with_midpoint_force
 from clutch_model.diagnosis.lockup import without_locked_torque
 from clutch_model.diagnosis.fitting import CANDIDATE_IDS, CandidateFit, fit_candidate
 from clutch_model.diagnosis.noise_model import fit_noise_model
-from clutch_model.diagnosis.selection import Selection, SelectionData, select_causes
+from clutch_model.diagnosis.selection import Selection, SelectionData, _resid, select_causes
 from clutch_model.diagnosis.split import Split, choose_split
 from clutch_model.diagnosis import sample as S
 from clutch_model.diagnosis.sample import DEFAULT_BUDGET_S
@@ -118,15 +118,14 @@ def choose_held_out(names: list, runs=None) -> list:
     return [names[k] for k in picks]
 
 
-def without_locked_rows(campaign: Campaign, with_results: bool = False) -> tuple:
+def without_locked_rows(campaign: Campaign) -> tuple:
     """The campaign with the measured torque NaN on locked rows (the driveline, not the
-    clutch's capacity, sets it there) -> (campaign, locked mask), plus the LockupResult per run
-    when ``with_results``: lock phases found from the data (diagnosis.lockup), padded
-    ``LOCK_PAD_S`` on both sides."""
+    clutch's capacity, sets it there) -> (campaign, locked mask, LockupResult per run): lock
+    phases found from the data (diagnosis.lockup), padded ``LOCK_PAD_S`` on both sides."""
     before = np.isfinite(campaign.torque_measured)
     campaign, results = without_locked_torque(campaign, pad_s=LOCK_PAD_S)
     locked = before & ~np.isfinite(campaign.torque_measured)
-    return (campaign, locked, results) if with_results else (campaign, locked)
+    return campaign, locked, results
 
 
 @dataclass
@@ -277,7 +276,7 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
     timings["prepare (regrid, decimate)"] = time.perf_counter() - tick
     campaign = smooth_sump(campaign)
     # lock-up phases (found from the data, diagnosis.lockup): the driveline sets the torque
-    campaign, locked, lock_results = without_locked_rows(campaign, with_results=True)
+    campaign, locked, lock_results = without_locked_rows(campaign)
     # each topic's raw samples served the regridding and the lock-up detection; nothing after
     # reads them (an hour at 1 kHz: ~0.5 GB)
     campaign = Campaign([replace(r, samples={}) for r in campaign.runs])
@@ -673,12 +672,16 @@ def _discover(data: SelectionData, base, campaign: Campaign, bench_model: Clutch
     from clutch_model.discovery.candidate import DiscoveryCandidate
 
     say("discovery: searching terms beyond the catalog on the fitted data")
-    cand = DiscoveryCandidate(campaign, bench_model=bench_model, progress=say)
-    dsel = select_causes(data, base, [cand], alpha=ALPHA, min_gain_frac=NAMED_GAIN_FRAC,
-                         structure_min_gain_frac=STRUCTURE_GAIN_FRAC, plain_gain=True, intervals=False,
-                         max_causes=1, refine_top=0, progress=say)
+    dsel = _judge_discovery(data, base, DiscoveryCandidate(campaign, bench_model=bench_model, progress=say), say)
     accepted = dsel.verdict == "named" and bool(dsel.causes and dsel.causes[0].parameters)
     return DiscoveryOutcome(dsel, accepted)
+
+
+def _judge_discovery(data: SelectionData, base, cand, say) -> Selection:
+    """A discovery candidate through the catalog's held-out selection (one cause at most)."""
+    return select_causes(data, base, [cand], alpha=ALPHA, min_gain_frac=NAMED_GAIN_FRAC,
+                         structure_min_gain_frac=STRUCTURE_GAIN_FRAC, plain_gain=True, intervals=False,
+                         max_causes=1, refine_top=0, progress=say)
 
 
 def _degradation_or_fade(data: SelectionData, base, campaign: Campaign, bench_model: ClutchModel,
@@ -692,20 +695,17 @@ def _degradation_or_fade(data: SelectionData, base, campaign: Campaign, bench_mo
     be told apart on held-out data and the verdict is ``unexplained``."""
     from clutch_model.diagnosis.structure_test import compare_residuals
     from clutch_model.discovery.candidate import DiscoveryCandidate
-
-    say("friction_degradation named: checking the reversible lookalike (slip-power fade) beyond the catalog")
     from clutch_model.discovery.terms import default_library
 
+    say("friction_degradation named: checking the reversible lookalike (slip-power fade) beyond the catalog")
     reversible = [t for t in default_library() if "energy" not in (t.a, t.b)]
-    cand = DiscoveryCandidate(campaign, bench_model=bench_model, progress=say, library=reversible)
-    dsel = select_causes(data, base, [cand], alpha=ALPHA, min_gain_frac=NAMED_GAIN_FRAC,
-                         structure_min_gain_frac=STRUCTURE_GAIN_FRAC, plain_gain=True, intervals=False,
-                         max_causes=1, refine_top=0, progress=say)
+    dsel = _judge_discovery(data, base, DiscoveryCandidate(campaign, bench_model=bench_model, progress=say,
+                                                           library=reversible), say)
     found = dsel.causes[0] if dsel.verdict == "named" and dsel.causes else None
     if found is None or not found.parameters:
         return sel, None
-    r_deg = _sel_resid(data, sel.final)
-    r_fade = _sel_resid(data, found.fitted)
+    r_deg = _resid(data, sel.final)
+    r_fade = _resid(data, found.fitted)
     fade_better = compare_residuals(r_deg, r_fade, data.train_mask, data.test_mask, data.run_start, data.t)
     deg_better = compare_residuals(r_fade, r_deg, data.train_mask, data.test_mask, data.run_start, data.t)
     say(f"friction_degradation vs reversible fade on held-out rows: fade t = {fade_better.t_stat:.1f}, "
@@ -724,12 +724,6 @@ def _degradation_or_fade(data: SelectionData, base, campaign: Campaign, bench_mo
     unexplained = Selection("unexplained", [], sel.steps, base, sel.baseline_structure, sel.remainder_structure,
                             ["friction_degradation", "discovered"], left, why)
     return unexplained, DiscoveryOutcome(dsel, False)
-
-
-def _sel_resid(data: SelectionData, fitted) -> np.ndarray:
-    from clutch_model.diagnosis.selection import _resid
-
-    return _resid(data, fitted)
 
 
 def _record_energy_history(model: ClutchModel, campaign: Campaign) -> None:

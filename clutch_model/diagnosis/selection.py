@@ -144,10 +144,10 @@ class Selection:
         return [c.id for c in self.causes]
 
 
-def row_interval_s(data: SelectionData) -> float:
+def row_interval_s(t, run_start) -> float:
     """Median interval between consecutive comparison rows of a run (s)."""
-    t = np.asarray(data.t, float)
-    d = np.diff(t)[~np.asarray(data.run_start, bool)[1:]]
+    t = np.asarray(t, float)
+    d = np.diff(t)[~np.asarray(run_start, bool)[1:]]
     d = d[d > 0]
     return float(np.median(d)) if d.size else 0.0
 
@@ -165,7 +165,7 @@ def sub_row_timing(data: SelectionData, predicted: np.ndarray, resid: np.ndarray
     drift, 200 Hz, nothing hidden): the calibrated model is 2.46 ms late, and the flexible
     residual model read that as structure (t = 5.6, the force's and torque's rates); within
     the allowance t = -0.1."""
-    half = 0.5 * row_interval_s(data)
+    half = 0.5 * row_interval_s(data.t, data.run_start)
     if not half > 0:
         return np.zeros(resid.size)
     pred = np.asarray(predicted, float)
@@ -240,21 +240,12 @@ def _remainder_test(data, resid, alpha, min_gain_frac, max_order):
                          feature_names=data.feature_names, alpha=alpha / tests, min_gain_frac=min_gain_frac,
                          max_order=max_order)
     if data.per_run_features is not None:
-        # ripple columns as they are; a column named PER_RUN_LEVEL (a friction level of the run,
-        # not in the diagnosis' columns: docs/diagnosis_statistics.md) beyond a per-run offset and
-        # slope, which slow drift resembles; the groups share the per-run test's alpha
-        names = list(data.per_run_feature_names)
-        level = [i for i, n in enumerate(names) if n.startswith(PER_RUN_LEVEL)]
-        groups = [(cols, offset) for cols, offset in
-                  (([i for i in range(len(names)) if i not in level], False), (level, True)) if cols]
-        for cols, offset in groups:
-            per_run = per_run_structure_test(resid, data.per_run_features[:, cols], data.train_mask, data.test_mask,
-                                             data.run_start, data.t, feature_names=[names[i] for i in cols],
-                                             alpha=alpha / tests / len(groups), min_gain_frac=min_gain_frac,
-                                             max_order=max_order, run_offset=offset)
-            if per_run.structured and not res.structured or per_run.comparison.t_stat > res.comparison.t_stat:
-                if per_run.structured or not res.structured:
-                    res = per_run
+        per_run = per_run_structure_test(resid, data.per_run_features, data.train_mask, data.test_mask,
+                                         data.run_start, data.t, feature_names=data.per_run_feature_names,
+                                         alpha=alpha / tests, min_gain_frac=min_gain_frac, max_order=max_order)
+        if per_run.structured and not res.structured or per_run.comparison.t_stat > res.comparison.t_stat:
+            if per_run.structured or not res.structured:
+                res = per_run
     if not res.structured:
         # structure the training rows do not show: the held-out rows' noise is larger
         excess = held_out_excess_test(resid, data.train_mask, data.test_mask, data.run_start, data.t,
@@ -264,7 +255,6 @@ def _remainder_test(data, resid, alpha, min_gain_frac, max_order):
     return res
 
 
-PER_RUN_LEVEL = "friction level of the run"     # the per-run column tested beyond offset and slope
 BACKFIT_PASSES = 8
 BACKFIT_TOL = 1e-3      # a pass that lowers the training MSE by less than this fraction ends it
 BACKFIT_MIN_CUT = 1e-6  # a refit is kept when it lowers the training MSE by more than this fraction

@@ -554,7 +554,6 @@ def per_run_structure_test(residual: np.ndarray, X: np.ndarray, train_mask, test
     otherwise take for a friction level (drift / none / 43 read `unexplained` at t = 7.9 with
     the torque column alone, 8.3 with an offset only)."""
     r = np.asarray(residual, float)
-    X = input_band(X, t, run_start)
     if run_offset:
         tt = np.asarray(t, float)
         starts = np.flatnonzero(np.asarray(run_start, bool))
@@ -568,6 +567,7 @@ def per_run_structure_test(residual: np.ndarray, X: np.ndarray, train_mask, test
                              max_order=max_order)
         return StructureResult(structured=cmp.significant(alpha, min_gain_frac, noise_units=True), comparison=cmp,
                                coefficients=None, feature_names=list(feature_names or []), prediction=both - null)
+    X = input_band(X, t, run_start)
     ok_train = train_mask & np.isfinite(r)
     # every run is cross-fitted (the training runs too, so the noise model is fitted to what
     # the per-run model leaves there), twice: the second pass whitens with that noise model

@@ -181,7 +181,7 @@ def test_per_run_friction_level_is_found_within_each_run(kind):
     predicted by no input across runs (test above), but within a run its level is pinned down
     by the run's other blocks: the per-run columns predict the held-out runs' residual.
     Measured (the torque column alone, beyond a per-run offset and slope, as the selection runs
-    it): found in 17 of 18 (noise class x seed); missed under band-limited noise seed 1 (t = 3.1:
+    it): found in 17 of 18 (noise class x seed); missed under band-limited noise seed 1 (t = 2.9:
     whitening a 10 Hz band limit leaves little of a slow level)."""
     found = 0
     for seed in SEEDS:
