@@ -99,7 +99,7 @@ class DiscoveryCandidate:
         fit = found.fit
         coefs = fit["coefficients"]
         return DiscoveredFit(self.id, {t.id: float(c) for t, c in zip(found.chosen, coefs)}, fit["ci"],
-                             describe(found.chosen, coefs, fit["ci"]), fit["model"],
+                             describe(found.chosen, coefs, fit["ci"], fit.get("tau_ci95_s")), fit["model"],
                              predicted=np.asarray(fit["predicted"], float), cv_mse=found.cv_mse,
                              dropped=found.dropped,
                              nuisance_only=lambda: self._friction_refit(anchor_model or base_model, train.mask,

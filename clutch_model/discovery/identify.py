@@ -37,7 +37,7 @@ from sklearn.model_selection import GroupKFold
 from clutch_model.diagnosis.fitting import (K_V_SCALE, N_CORR, P_CENTER_MPA, RIDGE_SCALE, THETA_CENTER_C,
                                             THETA_SCALE_C, apply_friction_correction)
 from clutch_model.discovery.heldout import HeldOutVerdict, block_gain_test
-from clutch_model.discovery.terms import TermSignals, default_library, describe, partner
+from clutch_model.discovery.terms import Term, TermSignals, default_library, describe, partner
 from clutch_model.errors import DataError
 from clutch_model.identification.objective import TorqueLeastSquares
 from clutch_model.plant import kernels as K
@@ -52,6 +52,10 @@ CV_FOLDS = 5
 MIN_GROUPS = 3
 SPAN_GROUPS = 6          # a campaign of fewer runs is cut into this many time spans
 REFIT_NFEV = 30
+TAU_RANGE_S = (0.05, 100.0)
+PRIOR_MU = 0.003           # unseen_range_prior: the friction change that costs one noise-level SSE
+PRIOR_THETA_C = np.arange(20.0, 150.0, 10.0)
+PRIOR_MARGIN_C = 5.0   # a low-passed term's fitted time constant stays in this range
 CI_BLOCK_S = 2.0
 CI_MIN_RUN_CLUSTERS = 5  # with this many fit runs the intervals are cluster-robust over runs
 RUN_CORRECTION_MAX = 0.3
@@ -202,38 +206,97 @@ def select_terms(y, X, groups, max_terms=MAX_TERMS):
 
 # --------------------------------------------------------------------------- joint refit
 class _Refit(TorqueLeastSquares):
-    """The project's torque least-squares objective over x = the term coefficients (scaled)
-    followed by the friction correction (ridge-held at the anchor's friction), every x
-    simulated over the whole campaign through the one prediction path."""
+    """The project's torque least-squares objective over x = the term coefficients (scaled),
+    then the log time constant of each low-passed term (a dynamic's time scale is fitted, not
+    taken from the library's grid), then the friction correction (ridge-held at the anchor's
+    friction), every x simulated over the whole campaign through the one prediction path."""
 
-    def __init__(self, base: ClutchModel, campaign, rows, terms, scales, sigma_nm):
+    def __init__(self, base: ClutchModel, campaign, rows, terms, scales, sigma_nm, unseen_prior=None):
         self.base = base
-        self.terms = terms
+        self.terms = list(terms)
         self.scales = np.asarray(scales, float)
         self.k = len(terms)
+        self.lagged = [i for i, t in enumerate(self.terms) if t.tau_s > 0]
+        self.m = len(self.lagged)
         self.a0 = base.friction_coefficients
         self.others = [m for m in base.mechanisms if m.id != "discovered"]
         self._inputs = PlantInputs.of(campaign)
         ridge = math.sqrt(max(int(rows.sum()), 1)) * sigma_nm / RIDGE_SCALE
         super().__init__(self._predict_xs, campaign.torque_measured, rows, ridge=ridge,
-                         ridge_index=slice(self.k, None))
+                         ridge_index=slice(self.k + self.m, None), prior=unseen_prior)
+
+    def start(self, coefficients) -> np.ndarray:
+        """x of the given term coefficients at the terms' own time constants, no friction change."""
+        log_tau = [math.log(self.terms[i].tau_s) for i in self.lagged]
+        return np.concatenate([np.asarray(coefficients, float) * self.scales, log_tau, np.zeros(N_CORR)])
+
+    def bounds(self):
+        lo = np.concatenate([np.full(self.k, -np.inf), np.full(self.m, math.log(TAU_RANGE_S[0])),
+                             np.full(N_CORR, -0.3)])
+        hi = np.concatenate([np.full(self.k, np.inf), np.full(self.m, math.log(TAU_RANGE_S[1])),
+                             np.full(N_CORR, 0.3)])
+        return lo, hi
 
     def coefficients(self, x):
         return np.asarray(x[:self.k], float) / self.scales
 
+    def terms_at(self, x) -> list:
+        """The terms with the time constants of x."""
+        out = list(self.terms)
+        for j, i in enumerate(self.lagged):
+            t = out[i]
+            out[i] = Term(t.kind, t.a, t.b, float(math.exp(x[self.k + j])))
+        return out
+
     def model_at(self, x) -> ClutchModel:
-        mech = Discovered({"terms": [t.id for t in self.terms],
+        mech = Discovered({"terms": [t.id for t in self.terms_at(x)],
                            "coefficients": [float(c) for c in self.coefficients(x)]})
-        a = apply_friction_correction(self.a0, x[self.k:])
+        a = apply_friction_correction(self.a0, x[self.k + self.m:])
         return self.base.with_friction(a=a).with_mechanisms(self.others + [mech])
 
     def _predict_xs(self, xs) -> np.ndarray:
         return predict_campaign([self.model_at(x) for x in xs], self._inputs).torque_nm
 
 
-def _ci95(refit: _Refit, x, campaign) -> np.ndarray:
-    """Half-widths of 95 % intervals of the term coefficients: sandwich covariance with the
-    scores summed per run (CI_MIN_RUN_CLUSTERS or more fit runs: an effect that is not the same
+def unseen_range_prior(sim, slip, fit_rows, sigma_nm) -> np.ndarray:
+    """Rows that hold the friction correction near 0 where the fit rows never were.
+
+    The correction is quadratic in pressure and temperature (diagnosis.fitting), and the car
+    rows cover a part of the range the bench table measured. Left free, its squares extrapolate:
+    measured on slip_power_fade@held#1, a later run 13 °C colder than any fit row came out at
+    43.8 N*m against the true torque with the refitted correction, 7.5 N*m with the bench
+    friction and the same term. So at points of the friction's domain (a grid of pack
+    temperature PRIOR_THETA_C, pressure 0 to 1.5x the highest seen) outside the fit rows'
+    box, the correction's change of mu_C and mu_S, and of k_V times the fit rows' RMS slip,
+    are pseudo-observations of 0, weighted so that a change of PRIOR_MU in both at every point
+    costs one noise-level sum of squares (as the ridge does for the coefficients). Inside the
+    box the data decide as before. On that cell (with the fitted time constant): unseen-bag
+    gain -81 % without the prior, +20 % with it (PRIOR_MU 0.01: -53 %)."""
+    p = np.asarray(sim.pressure_mpa, float)[fit_rows]
+    th = np.asarray(sim.pack_temperature_c, float)[fit_rows]
+    w = np.abs(np.asarray(slip, float))[fit_rows]
+    if p.size == 0:
+        return np.zeros((0, N_CORR))
+    p_lo, p_hi, th_lo, th_hi = float(p.min()), float(p.max()), float(th.min()), float(th.max())
+    w_ref = float(np.sqrt(np.mean(w ** 2)))
+    pts = [(pp, tt) for pp in np.linspace(0.0, 1.5 * p_hi, 7) for tt in PRIOR_THETA_C
+           if tt < th_lo - PRIOR_MARGIN_C or tt > th_hi + PRIOR_MARGIN_C or pp > 1.05 * p_hi or pp < 0.95 * p_lo]
+    if not pts:
+        return np.zeros((0, N_CORR))
+    weight = math.sqrt(fit_rows.sum() / (2 * len(pts))) * sigma_nm / PRIOR_MU
+    rows = np.zeros((2 * len(pts), N_CORR))
+    for j, (pp, tt) in enumerate(pts):
+        u = (pp - P_CENTER_MPA) / 1.0
+        q = (tt - THETA_CENTER_C) / THETA_SCALE_C
+        basis = np.array([1.0, u, u * u, q, q * q])
+        rows[2 * j, :5] = basis                          # mu_C and mu_S
+        rows[2 * j + 1, 5:] = basis * K_V_SCALE * w_ref  # k_V w (apart: the two may cancel at one slip only)
+    return weight * rows
+
+
+def _ci95(refit: _Refit, x, campaign) -> tuple:
+    """Half-widths of 95 % intervals of the term coefficients and of the log time constants
+    of the low-passed terms: sandwich covariance with the scores summed per run (CI_MIN_RUN_CLUSTERS or more fit runs: an effect that is not the same
     from run to run, e.g. a slow ripple whose phase changes, is not taken for a precise one) or
     else over CI_BLOCK_S blocks of each run (coloured noise within a block), scaled by
     G/(G-1) for G clusters."""
@@ -258,8 +321,8 @@ def _ci95(refit: _Refit, x, campaign) -> np.ndarray:
     except np.linalg.LinAlgError:
         ainv = np.linalg.pinv(a)
     cov = ainv @ b @ ainv
-    half = 1.959964 * np.sqrt(np.maximum(np.diag(cov)[:refit.k], 0.0))
-    return half / refit.scales
+    half = 1.959964 * np.sqrt(np.maximum(np.diag(cov)[:refit.k + refit.m], 0.0))
+    return half[:refit.k] / refit.scales, half[refit.k:]
 
 
 def _rmse(r, mask):
@@ -324,13 +387,22 @@ def search(campaign, model: ClutchModel, fit_mask, noise_model=None, *, library=
         p = partner(t)
         if p is not None and p.id not in {c.id for c in chosen}:
             chosen.append(p)
-    chosen = chosen[:P.MAX_DISCOVERED_TERMS]
+    chosen = _one_time_constant_each(chosen)[:P.MAX_DISCOVERED_TERMS]
 
     lib_ids = [t.id for t in library]
     anchor = model if friction_anchor is None else friction_anchor.with_mechanisms(model.mechanisms)
 
+    def column(term):
+        """A term's projected regressor on the fit rows (None: the projected residual)."""
+        if term is None:
+            return y_perp
+        if term.id in lib_ids:
+            return x_perp[:, lib_ids.index(term.id)]
+        c = term.regressor(sig)[fit_rows]
+        return c - zq @ (zq.T @ c)
+
     def refit(terms):
-        return _refit_terms(terms, lib_ids, x_perp, y_perp, sig, sim, fit_rows, anchor, campaign, sigma, say)
+        return _refit_terms(terms, column, sig, sim, fit_rows, anchor, campaign, sigma, say)
 
     out = Search(library=library, chosen=chosen, fit=None, cv_mse=cv_mse, dropped=[], residual=resid,
                  valid=valid, refit=refit)
@@ -348,6 +420,7 @@ def search(campaign, model: ClutchModel, fit_mask, noise_model=None, *, library=
             say(f"discovery: the joint refit of {', '.join(t.id for t in chosen)} failed ({text})")
             chosen = []
             break
+        chosen = fit["terms"]
         keep = _significant(chosen, fit["ci"])
         why = "95 % interval covers 0"
         if len(keep) == len(chosen):
@@ -427,7 +500,7 @@ def discover(campaign, calibrated_model: ClutchModel, split, noise_model=None, *
                                           v.runs_improved,
                                           f"dropped {', '.join(t.id for t in group)}: it adds nothing that "
                                           f"holds on the held-out data ({v.reason})")))
-        chosen, fit, resid_ext = rest, fit_r, resid_r
+        chosen, fit, resid_ext = fit_r["terms"], fit_r, resid_r
         verdict = test(campaign, eval_rows, base_eval, resid_ext)
     coefs, ci, model = fit["coefficients"], fit["ci"], fit["model"]
     if verdict.accepted and keep:
@@ -438,7 +511,7 @@ def discover(campaign, calibrated_model: ClutchModel, split, noise_model=None, *
                                  "no term's 95 % interval excludes 0 on the fit runs")
     ext_rmse = _rmse(resid_ext, eval_rows)
     tried.append(Tried([t.id for t in chosen], list(coefs), ext_rmse, verdict))
-    readings = describe(chosen, coefs, ci)
+    readings = describe(chosen, coefs, ci, fit.get("tau_ci95_s"))
 
     if not verdict.accepted:
         empty.tried = tried
@@ -507,6 +580,22 @@ def _material(terms, fit, sig, campaign, fit_rows) -> list:
     return keep
 
 
+def _one_time_constant_each(terms) -> list:
+    """One low-passed term per signal: the library offers a slip-power low-pass at two time
+    constants, and the refit fits the time constant, so a second one of the same signal would
+    converge onto the first (both then carry half the effect, and neither interval excludes 0).
+    The one the search chose first stays, its time constant a start."""
+    out, seen = [], set()
+    for t in terms:
+        key = (t.kind, t.a, t.b)
+        if t.tau_s > 0 and key in seen:
+            continue
+        if t.tau_s > 0:
+            seen.add(key)
+        out.append(t)
+    return out
+
+
 def _term_groups(terms) -> list:
     """Terms as the units that enter or leave together (a sin/cos ripple pair is one)."""
     groups, seen = [], set()
@@ -531,28 +620,34 @@ def _significant(terms, ci) -> list:
     return keep
 
 
-def _refit_terms(chosen, lib_ids, x_perp, y_perp, sig, sim, fit_rows, anchor, campaign, sigma, say) -> dict:
-    """Linear start from the projected regression, then least_squares inside the simulation."""
-    j_chosen = [lib_ids.index(t.id) for t in chosen]
-    a_lin = np.linalg.lstsq(x_perp[:, j_chosen], y_perp, rcond=None)[0]
+def _refit_terms(chosen, column, sig, sim, fit_rows, anchor, campaign, sigma, say) -> dict:
+    """Linear start from the projected regression (``column(term)``: a term's regressor on the
+    fit rows with the friction directions projected out), then least_squares inside the
+    simulation over the coefficients, the low-passed terms' time constants and the friction
+    correction. The fit's ``terms`` carry the fitted time constants."""
+    a_lin = np.linalg.lstsq(np.column_stack([column(t) for t in chosen]), column(None), rcond=None)[0]
     # scales: a coefficient of 1e-2 in scaled units moves the torque by ~1 % of its RMS
     torque_rms = max(float(np.sqrt(np.mean(sim.asperity_torque_nm[fit_rows] ** 2))), 1e-9)
     scales = []
     for t in chosen:
         g_rms = max(float(np.sqrt(np.mean(t.feature(sig)[fit_rows] ** 2))), 1e-12)
         scales.append(g_rms if t.kind == "mu" else g_rms / torque_rms)
-    scales = np.asarray(scales)
     say(f"discovery: refitting {', '.join(t.id for t in chosen)} jointly with the friction (simulated)")
-    refit = _Refit(anchor, campaign, fit_rows, chosen, scales, sigma)
-    x0 = np.concatenate([a_lin * scales, np.zeros(N_CORR)])
-    lo = np.concatenate([np.full(len(chosen), -np.inf), np.full(N_CORR, -0.3)])
-    sol = least_squares(refit.residuals, x0, jac=refit.jacobian, bounds=(lo, -lo), method="trf",
+    refit = _Refit(anchor, campaign, fit_rows, chosen, scales, sigma,
+                   unseen_prior=unseen_range_prior(sim, campaign.slip, fit_rows, sigma))
+    lo, hi = refit.bounds()
+    x0 = np.clip(refit.start(a_lin), lo, hi)
+    sol = least_squares(refit.residuals, x0, jac=refit.jacobian, bounds=(lo, hi), method="trf",
                         x_scale="jac", max_nfev=REFIT_NFEV, xtol=1e-8, ftol=1e-8)
     x = sol.x
     coefs = refit.coefficients(x)
-    half = _ci95(refit, x, campaign)
-    return {"coefficients": coefs, "model": refit.model_at(x), "predicted": refit.predict([x])[0],
-            "ci": {t.id: [float(c - h), float(c + h)] for t, c, h in zip(chosen, coefs, half)}}
+    terms = refit.terms_at(x)
+    half, half_log_tau = _ci95(refit, x, campaign)
+    tau_ci = {terms[i].id: [float(terms[i].tau_s * math.exp(-h)), float(terms[i].tau_s * math.exp(h))]
+              for i, h in zip(refit.lagged, half_log_tau)}
+    return {"terms": terms, "coefficients": coefs, "model": refit.model_at(x), "predicted": refit.predict([x])[0],
+            "ci": {t.id: [float(c - h), float(c + h)] for t, c, h in zip(terms, coefs, half)},
+            "tau_ci95_s": tau_ci}
 
 
 def _record_energy_history(model: ClutchModel, campaign) -> None:

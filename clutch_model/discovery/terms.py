@@ -139,7 +139,7 @@ class Term:
         if self.b:
             w += " × " + SIGNAL_INFO[self.b][1]
         if self.tau_s > 0:
-            w += f" (low-passed, τ = {self.tau_s:g} s)"
+            w += f" (low-passed, τ = {self.tau_s:.3g} s)"
         return w
 
     @property
@@ -200,8 +200,9 @@ def partner(term: Term) -> Term | None:
     return None
 
 
-def describe(terms, coefficients, intervals=None) -> list:
-    """Plain-words readings of fitted terms; a sin/cos ripple pair is read as one amplitude."""
+def describe(terms, coefficients, intervals=None, tau_intervals=None) -> list:
+    """Plain-words readings of fitted terms (with the 95 % intervals of their coefficients and
+    fitted time constants when given); a sin/cos ripple pair is read as one amplitude."""
     coefs = dict(zip([t.id for t in terms], coefficients))
     lines, done = [], set()
     for t, c in zip(terms, coefficients):
@@ -224,6 +225,9 @@ def describe(terms, coefficients, intervals=None) -> list:
                 text += f" (95 % interval {100 * lo:.3g} to {100 * hi:.3g} %)"
             else:
                 text += f" (95 % interval {lo:.3g} to {hi:.3g})"
+        if tau_intervals is not None and t.id in tau_intervals:
+            lo, hi = tau_intervals[t.id]
+            text += f"; τ 95 % interval {lo:.3g} to {hi:.3g} s"
         lines.append(text)
         done.add(t.id)
     return lines

@@ -1,6 +1,7 @@
 """The one least-squares objective on measured torque (car-data calibration and diagnosis).
 
     r(x) = (predicted(x) - measured)[mask] / scale   ++   ridge * (x[ridge_index] - ridge_center)
+                                                    ++   prior @ (x[ridge_index] - ridge_center)
 
 ``predict(xs)`` maps parameter vectors to predicted *measured* torque on the whole campaign
 (one row per x, through ``clutch_model.prediction.predict_campaign``), so the Jacobian is a
@@ -18,7 +19,7 @@ NONFINITE_RESIDUAL = 1e3   # residual (in units of the noise scale) of a non-fin
 
 class TorqueLeastSquares:
     def __init__(self, predict, measured, mask, scale: float = 1.0, ridge: float = 0.0,
-                 ridge_index=slice(None), ridge_center=0.0, steps=None):
+                 ridge_index=slice(None), ridge_center=0.0, steps=None, prior=None):
         self._predict = predict
         self.measured = np.asarray(measured, float)
         self.mask = np.asarray(mask, bool)
@@ -26,6 +27,8 @@ class TorqueLeastSquares:
         self.ridge = float(ridge)
         self.ridge_index = ridge_index
         self.ridge_center = ridge_center
+        # further linear pseudo-observations of the ridged parameters (rows x their count)
+        self.prior = None if prior is None or np.size(prior) == 0 else np.atleast_2d(np.asarray(prior, float))
         self._steps = steps or (lambda x: np.full(x.size, 1e-4))
         self.evaluations = 0           # parameter sets simulated
         self.jacobians = 0
@@ -56,6 +59,8 @@ class TorqueLeastSquares:
         r = self.data_residuals(self.predict([x]))[0]
         if self.ridge:
             r = np.concatenate([r, self.ridge * (x[self.ridge_index] - self.ridge_center)])
+        if self.prior is not None:
+            r = np.concatenate([r, self.prior @ (x[self.ridge_index] - self.ridge_center)])
         self._cache_x, self._cache_r = x.copy(), r
         return r
 
@@ -73,8 +78,10 @@ class TorqueLeastSquares:
         n = rs.shape[1]
         jac = np.zeros((r0.size, x.size))
         jac[:n] = ((rs - r0[None, :n]) / steps[:, None]).T
+        cols = np.arange(x.size)[self.ridge_index]
         if self.ridge:
-            cols = np.arange(x.size)[self.ridge_index]
-            jac[n:, cols] = self.ridge * np.eye(cols.size)
+            jac[n:n + cols.size, cols] = self.ridge * np.eye(cols.size)
+        if self.prior is not None:
+            jac[r0.size - self.prior.shape[0]:, cols] = self.prior
         self.jacobians += 1
         return jac

@@ -73,3 +73,38 @@ def test_low_passed_feature_matches_the_plant_filter():
     g = term.feature(TermSignals.from_simulation(camp, sim))
     np.testing.assert_allclose(sim.friction_coefficient / base - 1.0, c * g, rtol=1e-9, atol=1e-12)
     assert g[-1] == pytest.approx(sim.power_w[-2] * 1e-3, rel=0.02)   # settled: follows the power
+
+
+def test_unseen_range_prior_holds_the_friction_correction_only_outside_the_fit_rows():
+    from types import SimpleNamespace
+
+    from clutch_model.diagnosis.fitting import (P_CENTER_MPA, THETA_CENTER_C, THETA_SCALE_C,
+                                                apply_friction_correction)
+    from clutch_model.discovery.identify import N_CORR, PRIOR_MARGIN_C, PRIOR_MU, unseen_range_prior
+
+    n, sigma = 4000, 8.0
+    rng = np.random.default_rng(0)
+    sim = SimpleNamespace(pressure_mpa=rng.uniform(0.2, 1.0, n), pack_temperature_c=rng.uniform(60.0, 90.0, n))
+    slip = rng.uniform(-8.0, 8.0, n)
+    rows = unseen_range_prior(sim, slip, np.ones(n, bool), sigma_nm=sigma)
+    assert rows.shape[1] == N_CORR and rows.shape[0] > 0 and rows.shape[0] % 2 == 0
+    weight = rows[0, 0]                   # each mu row's constant basis is 1 x weight
+    # a shift of PRIOR_MU in mu_C/mu_S and in k_V w at every held point costs one noise-level SSE
+    shift = np.zeros(N_CORR)
+    shift[0] = PRIOR_MU
+    assert float(np.sum((rows @ shift) ** 2)) == pytest.approx(0.5 * n * sigma ** 2, rel=1e-9)
+    # every row is the correction's own change at a point outside the fit rows' box
+    delta = np.random.default_rng(1).normal(size=N_CORR) * 1e-3
+    a = apply_friction_correction(np.zeros(20), delta)
+    w_ref = float(np.sqrt(np.mean(slip ** 2)))
+    for mu_row, kv_row in zip(rows[0::2] / weight, rows[1::2] / weight):
+        p = mu_row[1] + P_CENTER_MPA
+        theta = mu_row[3] * THETA_SCALE_C + THETA_CENTER_C
+        assert (theta < 60.0 - PRIOR_MARGIN_C or theta > 90.0 + PRIOR_MARGIN_C or p > 1.05 or p < 0.19)
+        basis = np.array([1.0, p, p * p, theta, theta * theta])
+        assert mu_row @ delta == pytest.approx(a[0:5] @ basis, abs=1e-12)        # mu_C's change
+        assert kv_row @ delta == pytest.approx(a[15:20] @ basis * w_ref, abs=1e-12)   # k_V w's change
+    # fit rows over the whole temperature grid: only pressures above the seen ones are held
+    wide = SimpleNamespace(pressure_mpa=np.linspace(0.0, 1.0, n), pack_temperature_c=np.linspace(10.0, 160.0, n))
+    held = unseen_range_prior(wide, slip, np.ones(n, bool), sigma_nm=sigma)
+    assert np.all(held[0::2, 1] / held[0, 0] + P_CENTER_MPA > 1.05)
