@@ -316,3 +316,20 @@ def test_time_parameter_below_the_rows_resolution_is_not_named():
     assert fit("transport_delay", delay_s=0.002).below_resolution
     assert fit("actuator_lag", tau_s=0.003).below_resolution is None
     assert fit("spring_preload", preload_n=1.0).below_resolution is None
+
+
+@pytest.mark.parametrize("seed", [2, 3, 4])
+def test_cause_named_before_the_second_one_meets_its_rivals_again(seed):
+    """C = A + 0.4 B + 0.7 D looks best alone when y = A + B (it carries part of B); once B is
+    named, A with B predicts better than C with B, and the swap check names A and B."""
+    d, names, X, train, test, cols, eps, groups = _campaign(seed, "ar1_095")
+    a, b, dd = 0.03 * cols["slip_power"], 6.0 * cols["offset"], 0.03 * cols["temperature"]
+    y = a + b + eps
+    cands = [LinearCandidate("A", a), LinearCandidate("B", b), LinearCandidate("C", a + 0.4 * b + 0.7 * dd),
+             LinearCandidate("slip", cols["slip"])]
+    sel = select_causes(_data(y, d, names, X, train, test, groups), Zero(), cands)
+    assert sel.steps[0].chosen == "C"             # forward selection alone would name C, then B
+    assert sel.verdict == "named" and sel.cause_ids == ["A", "B"], sel.reason
+    assert "A replaces C" in sel.reason
+    ci = {c.id: c.parameters_ci95["gain"] for c in sel.causes}
+    assert ci["A"][0] < 1.0 < ci["A"][1] and ci["B"][0] < 1.0 < ci["B"][1]
