@@ -481,10 +481,7 @@ def select_causes(data: SelectionData, baseline, candidates: Sequence, alpha: fl
             if other is best or not nameable(other):
                 continue
             head = _compare(data, _resid(data, other.fitted), resid_best, max_order)
-            # beaten: on the whitened one-step errors, and not worse in the torque's own units
-            # (a model driven by noisy measured inputs carries their noise where a band-limited
-            # torque sensor is quiet; the whitened errors weigh exactly those frequencies)
-            if not (head.p_value < lookalike_alpha and head.delta_ll > 0 and head.rmse_alt <= head.rmse_null):
+            if not (head.p_value < lookalike_alpha and head.delta_ll > 0):
                 look.append(other.id)
         steps.append(SelectionStep(scores, best.id, look))
         named.append(Cause(best.id, best.fitted, dict(best.fitted.parameters), {}, best.comparison))
