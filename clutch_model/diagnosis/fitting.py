@@ -38,6 +38,19 @@ K_V_SCALE = 0.1
 RIDGE_SCALE = 0.05     # a correction of 0.05 in mu costs about one noise-level SSE
 
 
+P_SCALE_MPA = 1.0
+
+
+def friction_correction_basis(pressure_mpa, pack_temperature_c) -> np.ndarray:
+    """[1, p, p^2, q, q^2] at a point, or one such row per point of arrays (p = (P -
+    P_CENTER_MPA) / P_SCALE_MPA, q = (theta - THETA_CENTER_C) / THETA_SCALE_C): the change of
+    mu_C and mu_S there is this . delta[:5], of k_V this . delta[5:] * K_V_SCALE
+    (apply_friction_correction)."""
+    p = (np.asarray(pressure_mpa, float) - P_CENTER_MPA) / P_SCALE_MPA
+    q = (np.asarray(pack_temperature_c, float) - THETA_CENTER_C) / THETA_SCALE_C
+    return np.stack([np.ones_like(p), p, p * p, q, q * q], axis=-1)
+
+
 def _quadratic_in_poly(block: np.ndarray, c, pc, ps, tc, ts):
     """Add c0 + c1 p + c2 p^2 + c3 q + c4 q^2 (p=(P-pc)/ps, q=(theta-tc)/ts) to a polynomial
     block [1, P, P^2, theta, theta^2] exactly."""
@@ -54,8 +67,8 @@ def apply_friction_correction(a: np.ndarray, delta) -> np.ndarray:
     delta = np.asarray(delta, dtype=float)
     a = np.array(a, dtype=float)
     for base in (0, 5):          # mu_C and mu_S move together
-        _quadratic_in_poly(a[base:base + 5], delta[:5], P_CENTER_MPA, 1.0, THETA_CENTER_C, THETA_SCALE_C)
-    _quadratic_in_poly(a[15:20], delta[5:10] * K_V_SCALE, P_CENTER_MPA, 1.0, THETA_CENTER_C, THETA_SCALE_C)
+        _quadratic_in_poly(a[base:base + 5], delta[:5], P_CENTER_MPA, P_SCALE_MPA, THETA_CENTER_C, THETA_SCALE_C)
+    _quadratic_in_poly(a[15:20], delta[5:10] * K_V_SCALE, P_CENTER_MPA, P_SCALE_MPA, THETA_CENTER_C, THETA_SCALE_C)
     return a
 
 

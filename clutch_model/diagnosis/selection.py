@@ -319,14 +319,18 @@ def _backward_elimination(data, baseline, named, cand_by_id, current, alpha, min
     redundant: a 150 ms transport delay with drag (lockup seed 47) was read as a 107 ms delay,
     then a 43 ms actuator lag on top, then drag; with drag in the model the delay alone
     explains it. The weakest cause (by its held-out t when named) is tried first; one is
-    dropped at a time. -> (model, causes, [what was dropped and why])."""
+    dropped at a time. -> (model, causes, [what was dropped and why], {cause id: the model
+    of the others refitted without it, from the pass that kept every cause})."""
     dropped = []
+    without = {}
     while len(named) >= 2:
         resid_full = _resid(data, current)
+        without = {}
         for cause in sorted(named, key=lambda c: c.comparison.t_stat if c.comparison is not None else 0.0):
             others = [c.id for c in named if c is not cause]
             say(f"does {cause.id} hold with {', '.join(others)} refitted without it?")
             model_wo, causes_wo = _refit_chain(data, baseline, others, cand_by_id, refine)
+            without[cause.id] = model_wo
             cmp = _compare(data, _resid(data, model_wo), resid_full, max_order)
             if not cmp.significant(alpha, min_gain_frac, plain_gain):
                 for c in causes_wo:
@@ -335,16 +339,17 @@ def _backward_elimination(data, baseline, named, cand_by_id, current, alpha, min
                 dropped.append(f"{cause.id} dropped: with {', '.join(others)} refitted without it the held-out "
                                f"prediction is no worse (t = {cmp.t_stat:.1f})")
                 named, current = causes_wo, model_wo
+                without = {}
                 break
         else:
             break
-    return current, named, dropped
+    return current, named, dropped, without
 
 
 SWAP_RIVALS = 2     # runners-up per named cause tried again with the other causes in the model
 
 
-def _swap_check(data, baseline, named, steps, cand_by_id, current, alpha, min_gain_frac, plain_gain,
+def _swap_check(data, baseline, named, steps, cand_by_id, current, without, alpha, min_gain_frac, plain_gain,
                 lookalike_alpha, max_order, refine, say):
     """With two or more causes named, each one meets its step's runners-up again, now with the
     other causes in the model: a cause is chosen on top of the causes before it, and its
@@ -357,7 +362,9 @@ def _swap_check(data, baseline, named, steps, cand_by_id, current, alpha, min_ga
     transport_delay+drag_torque@unaligned#1 (`--quick`, a 27 ms delay, torque at 50 Hz): the
     delay fitted without drag came out at 17 ms (t = 2.6), an actuator lag was named first
     (t = 6.1) and drag second, with nothing asking again whether the delay does better once
-    drag is in the model. -> (model, causes, [swaps made], [lookalikes left])."""
+    drag is in the model. ``without``: the models of the other causes per cause id that
+    backward elimination already refitted (the rest are refitted here).
+    -> (model, causes, [swaps made], [lookalikes left])."""
     swaps, looks = [], []
     for cause in list(named):
         step = next((st for st in steps if st.chosen == cause.id), None)
@@ -370,7 +377,9 @@ def _swap_check(data, baseline, named, steps, cand_by_id, current, alpha, min_ga
             continue
         others = [c.id for c in named if c is not cause]
         say(f"does {cause.id} beat {', '.join(rivals)} with {', '.join(others)} in the model?")
-        model_wo, _ = _refit_chain(data, baseline, others, cand_by_id, refine)
+        model_wo = without.get(cause.id)
+        if model_wo is None:
+            model_wo = _refit_chain(data, baseline, others, cand_by_id, refine)[0]
         resid_wo, resid_full = _resid(data, model_wo), _resid(data, current)
         for rival in rivals:
             order = [rival if c is cause else c.id for c in named]     # the rival in the cause's place
@@ -494,17 +503,17 @@ def select_causes(data: SelectionData, baseline, candidates: Sequence, alpha: fl
 
     dropped = []
     if len(named) >= 2:
-        current, named, dropped = _backward_elimination(data, baseline, named, {c.id: c for c in candidates},
-                                                        current, alpha, min_gain_frac, plain_gain, max_order,
-                                                        refine_top > 0, say)
-        resid_cur = _resid(data, current)
-    if len(named) >= 2:
-        current, named, swaps, late_looks = _swap_check(
-            data, baseline, named, steps, {c.id: c for c in candidates}, current, alpha, min_gain_frac,
-            plain_gain, lookalike_alpha, max_order, refine_top > 0, say)
-        dropped += swaps
-        if late_looks:
-            steps.append(SelectionStep([], None, late_looks))
+        cand_by_id = {c.id: c for c in candidates}
+        current, named, dropped, without = _backward_elimination(data, baseline, named, cand_by_id, current, alpha,
+                                                                 min_gain_frac, plain_gain, max_order,
+                                                                 refine_top > 0, say)
+        if len(named) >= 2:
+            current, named, swaps, late_looks = _swap_check(
+                data, baseline, named, steps, cand_by_id, current, without, alpha, min_gain_frac,
+                plain_gain, lookalike_alpha, max_order, refine_top > 0, say)
+            dropped += swaps
+            if late_looks:
+                steps.append(SelectionStep([], None, late_looks))
         resid_cur = _resid(data, current)
 
     say("structure test of what remains")

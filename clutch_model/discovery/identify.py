@@ -34,8 +34,8 @@ from scipy.optimize import least_squares
 from sklearn.linear_model import orthogonal_mp
 from sklearn.model_selection import GroupKFold
 
-from clutch_model.diagnosis.fitting import (K_V_SCALE, N_CORR, P_CENTER_MPA, RIDGE_SCALE, THETA_CENTER_C,
-                                            THETA_SCALE_C, apply_friction_correction)
+from clutch_model.diagnosis.fitting import (K_V_SCALE, N_CORR, RIDGE_SCALE, apply_friction_correction,
+                                            friction_correction_basis)
 from clutch_model.discovery.heldout import HeldOutVerdict, block_gain_test
 from clutch_model.discovery.terms import Term, TermSignals, default_library, describe, partner
 from clutch_model.errors import DataError
@@ -52,10 +52,10 @@ CV_FOLDS = 5
 MIN_GROUPS = 3
 SPAN_GROUPS = 6          # a campaign of fewer runs is cut into this many time spans
 REFIT_NFEV = 30
-TAU_RANGE_S = (0.05, 100.0)
-PRIOR_MU = 0.003           # unseen_range_prior: the friction change that costs one noise-level SSE
-PRIOR_THETA_C = np.arange(20.0, 150.0, 10.0)
-PRIOR_MARGIN_C = 5.0   # a low-passed term's fitted time constant stays in this range
+TAU_RANGE_S = (0.05, 100.0)  # a low-passed term's fitted time constant stays in this range
+PRIOR_MU = 0.003             # unseen_range_prior: the friction change that costs one noise-level SSE
+PRIOR_THETA_C = np.arange(20.0, 150.0, 10.0)   # its grid of pack temperatures
+PRIOR_MARGIN_C = 5.0         # a grid temperature this far outside the fit rows' range is unseen
 CI_BLOCK_S = 2.0
 CI_MIN_RUN_CLUSTERS = 5  # with this many fit runs the intervals are cluster-robust over runs
 RUN_CORRECTION_MAX = 0.3
@@ -146,9 +146,7 @@ def friction_directions(sig: TermSignals) -> np.ndarray:
     diagnosis.fitting.apply_friction_correction (μ_C and μ_S together, and k_V)."""
     mu = sig.friction_coefficient
     dt_dmu = np.where(mu > 1e-9, sig.asperity_torque_nm / np.where(mu > 1e-9, mu, 1.0), 0.0)
-    p = sig.values["pressure"] - P_CENTER_MPA
-    q = (sig.values["pack_temperature"] + K.THETA_REF_C - THETA_CENTER_C) / THETA_SCALE_C
-    basis = np.column_stack([np.ones_like(p), p, p * p, q, q * q])
+    basis = friction_correction_basis(sig.values["pressure"], sig.values["pack_temperature"] + K.THETA_REF_C)
     w = np.where(sig.locked, 0.0, sig.values["slip_abs"])
     return np.column_stack([basis * dt_dmu[:, None], basis * (dt_dmu * w * K_V_SCALE)[:, None]])
 
@@ -286,9 +284,7 @@ def unseen_range_prior(sim, slip, fit_rows, sigma_nm) -> np.ndarray:
     weight = math.sqrt(fit_rows.sum() / (2 * len(pts))) * sigma_nm / PRIOR_MU
     rows = np.zeros((2 * len(pts), N_CORR))
     for j, (pp, tt) in enumerate(pts):
-        u = (pp - P_CENTER_MPA) / 1.0
-        q = (tt - THETA_CENTER_C) / THETA_SCALE_C
-        basis = np.array([1.0, u, u * u, q, q * q])
+        basis = friction_correction_basis(pp, tt)
         rows[2 * j, :5] = basis                          # mu_C and mu_S
         rows[2 * j + 1, 5:] = basis * K_V_SCALE * w_ref  # k_V w (apart: the two may cancel at one slip only)
     return weight * rows
@@ -296,8 +292,9 @@ def unseen_range_prior(sim, slip, fit_rows, sigma_nm) -> np.ndarray:
 
 def _ci95(refit: _Refit, x, campaign) -> tuple:
     """Half-widths of 95 % intervals of the term coefficients and of the log time constants
-    of the low-passed terms: sandwich covariance with the scores summed per run (CI_MIN_RUN_CLUSTERS or more fit runs: an effect that is not the same
-    from run to run, e.g. a slow ripple whose phase changes, is not taken for a precise one) or
+    of the low-passed terms: sandwich covariance with the scores summed per run
+    (CI_MIN_RUN_CLUSTERS or more fit runs: an effect that is not the same from run to run,
+    e.g. a slow ripple whose phase changes, is not taken for a precise one) or
     else over CI_BLOCK_S blocks of each run (coloured noise within a block), scaled by
     G/(G-1) for G clusters."""
     jac = refit.jacobian(x)
