@@ -168,7 +168,8 @@ def test_per_run_columns_find_nothing_in_pure_noise(kind):
         d, names, X, train, test = _case(seed, 200)
         noise = make_noise(kind, d["run_start"], SIGMA_NM, 1000 + seed)
         cols = _per_run_columns(d)
-        # as the selection runs them: ripple columns as they are, the level beyond offset and slope
+        # ripple columns as the selection runs them; the level beyond offset and slope, as
+        # run_offset=True tests it (the selection does not run the level column)
         for X, offset in ((cols[:, :4], False), (cols[:, 4:], True)):
             res = per_run_structure_test(noise, X, train, test, d["run_start"], d["t"], run_offset=offset)
             assert not res.structured, (kind, seed, offset, res.comparison)
@@ -180,9 +181,10 @@ def test_per_run_friction_level_is_found_within_each_run(kind):
     """A friction level drawn per run (uniform +-8 %, the lining or oil state of the day) is
     predicted by no input across runs (test above), but within a run its level is pinned down
     by the run's other blocks: the per-run columns predict the held-out runs' residual.
-    Measured (the torque column alone, beyond a per-run offset and slope, as the selection runs
-    it): found in 17 of 18 (noise class x seed); missed under band-limited noise seed 1 (t = 2.9:
-    whitening a 10 Hz band limit leaves little of a slow level)."""
+    Measured (the torque column alone, beyond a per-run offset and slope: run_offset=True, which
+    the selection does not use): found in 17 of 18 (noise class x seed); missed under
+    band-limited noise seed 1 (t = 2.9: whitening a 10 Hz band limit leaves little of a slow
+    level)."""
     found = 0
     for seed in SEEDS:
         d, names, X, train, test = _case(seed, 200)
