@@ -28,6 +28,7 @@ import numpy as np
 from scipy.signal import lfilter
 
 DEFAULT_MAX_ORDER = 48
+FLOOR_EXTRA_ORDER = 8     # a white floor turns AR(p) into ARMA(p, p): approximated by a longer AR
 
 
 def segments_of(values: np.ndarray, run_start: np.ndarray | None = None, mask: np.ndarray | None = None) -> list:
@@ -160,6 +161,52 @@ def _burg(segments: list, max_order: int):
     return filters, np.array(var)
 
 
+def _autocovariance(filters: list, var: np.ndarray, lags: int) -> np.ndarray:
+    """Autocovariance (lags 0..lags) of the AR model given by a Levinson/Burg recursion's
+    prediction-error filters and error variances (step-up relations, then the AR recursion)."""
+    p = len(filters) - 1
+    g = np.zeros(lags + 1)
+    g[0] = var[0]
+    for m in range(1, min(p, lags) + 1):
+        prev = filters[m - 1]
+        k = filters[m][m]
+        g[m] = -k * var[m - 1] - float(np.dot(prev[1:m], g[m - 1:0:-1]))
+    a = filters[p]
+    for m in range(p + 1, lags + 1):
+        g[m] = -float(np.dot(a[1:], g[m - p:m][::-1]))
+    return g
+
+
+def _levinson(g: np.ndarray, order: int):
+    """Levinson-Durbin on an autocovariance -> (filters per order, error variance per order)."""
+    a = np.array([1.0])
+    e = float(g[0])
+    filters, var = [a], [e]
+    for m in range(1, order + 1):
+        delta = float(np.dot(a, g[m:0:-1]))
+        k = -delta / e if e > 0 else 0.0
+        k = min(max(k, -0.999999), 0.999999)
+        ext = np.r_[a, 0.0]
+        a = ext + k * ext[::-1]
+        e *= 1.0 - k * k
+        filters.append(a)
+        var.append(e)
+    return filters, np.array(var)
+
+
+def with_white_floor(nm: "NoiseModel", floor_variance: float) -> "NoiseModel":
+    """The AR approximation (same order) of the noise model's spectrum plus white noise of
+    ``floor_variance``: its one-step predictions can never be better than that floor."""
+    if not floor_variance > 0:
+        return nm
+    p = min(max(2 * nm.order, nm.order + FLOOR_EXTRA_ORDER), DEFAULT_MAX_ORDER)
+    g = _autocovariance(nm.lattice, nm.order_variance, p)
+    g[0] += floor_variance
+    filters, var = _levinson(g, p)
+    return NoiseModel(a=filters[p], innovation_variance=float(var[p]), lattice=filters, order_variance=var,
+                      n_samples=nm.n_samples, bic=nm.bic)
+
+
 def fit_noise_model(x: np.ndarray, run_start: np.ndarray | None = None, mask: np.ndarray | None = None,
                     max_order: int = DEFAULT_MAX_ORDER, criterion: str = "bic") -> NoiseModel:
     """Fit AR(p), p <= max_order by BIC (or AIC), to the finite rows of x inside mask, segments
@@ -180,5 +227,8 @@ def fit_noise_model(x: np.ndarray, run_start: np.ndarray | None = None, mask: np
     pen = np.log(n_eff) if criterion == "bic" else 2.0
     ic = n_eff * np.log(var) + orders * pen
     p = int(np.argmin(ic))
-    return NoiseModel(a=filters[p], innovation_variance=float(var[p]), lattice=filters[:p + 1],
-                      order_variance=var[:p + 1], n_samples=n, bic=float(ic[p]))
+    nm = NoiseModel(a=filters[p], innovation_variance=float(var[p]), lattice=filters[:p + 1],
+                    order_variance=var[:p + 1], n_samples=n, bic=float(ic[p]))
+    import os
+    fl = float(os.environ.get("NOISE_FLOOR_NM", "0"))
+    return with_white_floor(nm, fl * fl) if fl > 0 else nm
