@@ -35,7 +35,7 @@ from clutch_model.diagnosis.measured_time import measured_time_campaign, topics_
 from clutch_model.plant.simulate import SimResult
 from clutch_model.diagnosis import features as F
 from clutch_model.diagnosis.candidates import CampaignContext, MechanismCandidate, baseline_fit
-from clutch_model.diagnosis.input_hold import with_midpoint_force
+from clutch_model.diagnosis.input_hold import with_midpoint_force, with_smoothed_inputs
 from clutch_model.diagnosis.lockup import without_locked_torque
 from clutch_model.diagnosis.fitting import CANDIDATE_IDS, CandidateFit, fit_candidate
 from clutch_model.diagnosis.noise_model import fit_noise_model
@@ -258,6 +258,8 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
     # -- stage 1: split ---------------------------------------------------------------------
     campaign = runs if isinstance(runs, Campaign) else Campaign(list(runs))
     del runs                      # long logs: the native rows go once regridded / decimated
+    # the plant is driven by cleaner inputs: force and slip smoothed without phase (input_hold)
+    campaign = with_smoothed_inputs(campaign)
     if measured_time is None:
         measured_time = topics_unaligned(campaign.runs)
     if measured_time:

@@ -54,11 +54,13 @@ class Run:
 
     @property
     def slip_raw_t(self) -> np.ndarray:
-        return self.samples["slip_speed"][0]
+        """Log times of the slip samples as logged (``slip_speed_logged`` when the diagnosis has
+        put smoothed ones under ``slip_speed``)."""
+        return self.samples.get("slip_speed_logged", self.samples["slip_speed"])[0]
 
     @property
     def slip_raw_rad_s(self) -> np.ndarray:
-        return self.samples["slip_speed"][1]
+        return self.samples.get("slip_speed_logged", self.samples["slip_speed"])[1]
 
     @property
     def duration_s(self) -> float:
