@@ -35,7 +35,7 @@ from clutch_model.diagnosis.measured_time import measured_time_campaign, topics_
 from clutch_model.plant.simulate import SimResult
 from clutch_model.diagnosis import features as F
 from clutch_model.diagnosis.candidates import CampaignContext, MechanismCandidate, baseline_fit
-from clutch_model.diagnosis.input_hold import with_midpoint_force, with_smoothed_inputs
+from clutch_model.diagnosis.input_hold import decide_input_smoothing, with_midpoint_force, with_smoothed_slip
 from clutch_model.diagnosis.lockup import without_locked_torque
 from clutch_model.diagnosis.fitting import CANDIDATE_IDS, CandidateFit, fit_candidate
 from clutch_model.diagnosis.noise_model import fit_noise_model
@@ -164,6 +164,7 @@ class Diagnosis:
     discovery: "DiscoveryOutcome | None" = None
     diagnosis_rate: dict = field(default_factory=dict)   # decimation plan (diagnosis.decimation)
     diagnosis_sample: dict = field(default_factory=dict)  # windows of a long campaign (diagnosis.sample)
+    inputs: dict = field(default_factory=dict)  # the slip smoothed or not (input_hold.InputSmoothing)
 
     @property
     def gain_pct(self) -> float:
@@ -258,8 +259,12 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
     # -- stage 1: split ---------------------------------------------------------------------
     campaign = runs if isinstance(runs, Campaign) else Campaign(list(runs))
     del runs                      # long logs: the native rows go once regridded / decimated
-    # the plant is driven by cleaner inputs: force and slip smoothed without phase (input_hold)
-    campaign = with_smoothed_inputs(campaign)
+    # a torque sensor quieter at high frequencies than the slip noise the model carries into its
+    # prediction: the plant is driven by the slip smoothed without phase (input_hold)
+    smoothing = decide_input_smoothing(campaign, nominal)
+    say(smoothing.describe())
+    if smoothing.smoothed:
+        campaign = with_smoothed_slip(campaign, smoothing.sigma_s)
     if measured_time is None:
         measured_time = topics_unaligned(campaign.runs)
     if measured_time:
@@ -284,7 +289,8 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
     campaign = Campaign([replace(r, samples={}) for r in campaign.runs])
     args = dict(nominal=nominal, bench_model=bench_model, held_out=held_out, candidates=candidates,
                 calibrate=calibrate, say=say, emit=emit, discover=discover, fit_executor=fit_executor,
-                sample_budget_s=sample_budget_s, plan=plan, timings=timings, tick=tick, bench_info=bench_info)
+                sample_budget_s=sample_budget_s, plan=plan, timings=timings, tick=tick, bench_info=bench_info,
+                inputs=smoothing.to_dict())
     d = _diagnose_masked(campaign, locked, **args)
     # a named delay or torque-sensor lag carries each lock phase's driveline torque into the
     # measured torque after it, where no clutch model can follow: those rows are left out too,
@@ -379,7 +385,7 @@ def with_lock_tail(campaign: Campaign, lock_results: list, tail_s: float) -> tup
 
 def _diagnose_masked(campaign: Campaign, locked: np.ndarray, *, nominal, bench_model, held_out, candidates,
                      calibrate, say, emit, discover, fit_executor, sample_budget_s, plan, timings,
-                     tick, bench_info) -> "Diagnosis":
+                     tick, bench_info, inputs) -> "Diagnosis":
     """Stages 1 (split) to 4 of ``diagnose_campaign`` on a campaign whose locked rows are
     already NaN."""
     timings = dict(timings)
@@ -419,7 +425,7 @@ def _diagnose_masked(campaign: Campaign, locked: np.ndarray, *, nominal, bench_m
         + (f"; {int(locked.sum())} locked rows kept out of the residuals" if locked.any() else ""))
     diagnosis_rate = plan.to_json() if plan is not None else {"factor": 1, "native": True}
     emit("split", split=split, locked_rows=int(locked.sum()), diagnosis_rate=diagnosis_rate,
-         diagnosis_sample=sample_info)
+         diagnosis_sample=sample_info, inputs=inputs)
 
     # -- stage 2: calibrate -----------------------------------------------------------------
     if sampled is None:
@@ -575,7 +581,8 @@ def _diagnose_masked(campaign: Campaign, locked: np.ndarray, *, nominal, bench_m
                   nominal_pred=nominal_pred, causes=causes, cause_ci95=cause_ci, selection=sel,
                   split=split, fit_mask=fit_mask, eval_mask=eval_mask, locked_rows=int(locked.sum()),
                   noise=noise, bench_info=bench_info or {}, calibration_info=calibration_info, timings=timings,
-                  discovery=discovery, diagnosis_rate=diagnosis_rate, diagnosis_sample=sample_info)
+                  discovery=discovery, diagnosis_rate=diagnosis_rate, diagnosis_sample=sample_info,
+                  inputs=inputs)
     emit("selected", diagnosis=d)
     return d
 

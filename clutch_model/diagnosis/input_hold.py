@@ -1,19 +1,27 @@
-"""The inputs the diagnosis gives the plant: smoothed without phase, the force at each step's
-midpoint.
+"""The inputs the diagnosis gives the plant: the slip smoothed where the torque sensor is
+quieter than its noise, the force at each step's midpoint.
 
-Smoothed inputs (``with_smoothed_inputs``). The model is driven by the measured force and
-slip, sensor noise included, and that noise reaches the predicted torque: a white slip noise
-of 0.05 rad/s moves it at every sample through the Stribeck and viscous terms. Where the
-torque sensor's own noise is band-limited (a 10 Hz filter, a held or median-filtered reading),
-the whitened one-step errors weigh exactly the high frequencies where the model carries that
-input noise, and a candidate that smooths the model's output gains there, whatever it means:
-on actuator_lag@lowpass#1 (a 70 ms actuator lag) the torque-sensor lag won at held-out
-t = 693 against 37 and was named. The diagnosis is about the plant, so it works on the
-cleaner inputs, as it does with the sump temperature: force and slip smoothed by a Gaussian
-kernel of 5 ms standard deviation (-3 dB at 25 Hz, zero phase: no delay added), after which
-the actuator lag wins (t = 53 against 43) and is named. The slip as logged stays in the run's
-samples (``slip_speed_logged``) for the lock-up detection, which estimates the slip sensor's
-noise from it. Replay is not changed.
+The slip smoothed (``decide_input_smoothing``, ``with_smoothed_slip``). The model is driven by
+the measured slip, sensor noise included, and that noise reaches the predicted torque through
+the friction curve's slope and the viscous terms (0.05 rad/s of white slip noise: ~0.2 N*m at
+the top of the band on the virtual car), where the measured torque, made from the true slip,
+has none of it. Against a white or AR(1) torque noise that is immaterial. Against a torque
+sensor that is quiet at high frequencies (a 10 Hz band limit, a reading held at 10 Hz) the
+whitened one-step errors weigh exactly the frequencies where the model carries that noise, and a
+candidate that smooths the model's output gains there whatever it means: on
+actuator_lag@lowpass#1 (a 70 ms actuator lag) the torque-sensor lag won at held-out t = 693
+against 37 and was named. So the diagnosis measures both: the torque's noise near the Nyquist
+frequency (``high_frequency_noise``, robust 4th differences) and the slip's, carried into the
+torque by the model's rms slope dT/d(slip) on the first run (``torque_per_slip``). When the
+torque's is below SMOOTHING_NOISE_RATIO times the slip noise's part, the plant is driven by the
+slip smoothed with a 5 ms Gaussian (-3 dB at 25 Hz, zero phase: no delay added); then the
+actuator lag wins head to head and is named. Not smoothed under white, AR(1) or drift noise:
+there the smoothing took information with the noise (torque_sensor_lag@ar1#1 became a lookalike
+of actuator_lag, drag_torque@ar1#1 read none). The force is not smoothed: its noise moves the
+torque less at high frequencies and its edges carry the lag family's evidence. The slip as
+logged stays in the run's samples (``slip_speed_logged``) for the lock-up detection, which
+estimates the slip sensor's noise from it. Replay is not changed; report.json's ``inputs``
+gives the figures and the decision.
 
 The force at each step's midpoint (``with_midpoint_force``).
 
@@ -32,7 +40,7 @@ timing) is not changed: this is how the diagnosis feeds the plant the logged for
 """
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -64,7 +72,116 @@ def with_midpoint_force(campaign):
     return Campaign(runs)
 
 
-INPUT_SMOOTHING_S = 0.005   # Gaussian kernel's standard deviation: -3 dB at 25 Hz
+SLIP_SMOOTHING_S = 0.005      # Gaussian kernel's standard deviation: -3 dB at 25 Hz
+SMOOTHING_NOISE_RATIO = 2.0   # smooth when the torque's high-frequency noise is below this many
+                              # times the slip noise's part of the predicted torque
+SENSITIVITY_WINDOW_S = 20.0   # rows of the first run the torque's slip sensitivity is taken on
+SLIP_STEP_RAD_S = 0.1
+HF_DIFFERENCE_ORDER = 4       # 4th differences: the top of the band (gain 16 sin^4(w/2))
+
+
+def high_frequency_noise(y_runs, order: int = HF_DIFFERENCE_ORDER) -> float:
+    """White-equivalent standard deviation of a signal's noise near its sampling rate's Nyquist
+    frequency, robust to its smooth part and to transients: 1.4826 MAD of its ``order``-th
+    differences / sqrt(C(2 order, order)), pooled over runs. White noise of sd s gives s; on
+    200 Hz samples an AR(1) 0.95 noise of sd 8 gives 1.35, a 10 Hz band-limited one 0.18, one
+    drawn at 10 Hz and held 0."""
+    from math import comb
+
+    d = [np.diff(np.asarray(y, float)[np.isfinite(y)], order) for y in y_runs]
+    d = np.concatenate([x for x in d if x.size]) if any(x.size for x in d) else np.zeros(0)
+    if d.size < 10:
+        return float("nan")
+    return float(1.4826 * np.median(np.abs(d - np.median(d))) / np.sqrt(comb(2 * order, order)))
+
+
+@dataclass
+class InputSmoothing:
+    """Whether the diagnosis smooths the measured slip before driving the plant with it, and
+    the figures it decided on (module docstring)."""
+
+    torque_noise_hf_nm: float          # the measured torque's high-frequency noise
+    slip_noise_hf_rad_s: float         # the slip sensor's
+    torque_per_slip_nm_s: float        # rms dT/d(slip) of the model on slipping rows
+    smoothed: bool
+    sigma_s: float = SLIP_SMOOTHING_S
+
+    @property
+    def slip_noise_in_torque_nm(self) -> float:
+        return self.slip_noise_hf_rad_s * self.torque_per_slip_nm_s
+
+    def describe(self) -> str:
+        what = (f"slip smoothed without phase ({1e3 * self.sigma_s:.0f} ms Gaussian)" if self.smoothed
+                else "inputs as logged")
+        return (f"inputs: {what}: the torque's high-frequency noise {self.torque_noise_hf_nm:.2f} N*m, "
+                f"the slip noise's part of the model torque {self.slip_noise_in_torque_nm:.2f} N*m")
+
+    def to_dict(self) -> dict:
+        return {"slip_smoothed": self.smoothed, "sigma_s": self.sigma_s if self.smoothed else 0.0,
+                "torque_noise_hf_nm": self.torque_noise_hf_nm,
+                "slip_noise_in_torque_nm": self.slip_noise_in_torque_nm}
+
+
+def _samples(run, channel, grid_values):
+    s = run.samples.get(channel)
+    return (s[0], s[1]) if s is not None else (run.t, grid_values)
+
+
+def torque_per_slip(campaign, model, window_s: float = SENSITIVITY_WINDOW_S) -> float:
+    """Root mean square of d(predicted torque)/d(slip) (N*m per rad/s) of ``model`` on the slipping rows of
+    the first ``window_s`` of the campaign's first run (two simulations, the slip moved by
+    SLIP_STEP_RAD_S)."""
+    from clutch_model.formats.bag_reader import Campaign
+    from clutch_model.prediction import predict_campaign
+
+    run = campaign.runs[0]
+    keep = run.t <= run.t[0] + window_s
+    if keep.sum() < 10:
+        return float("nan")
+    cut = {f: (getattr(run, f)[keep] if getattr(run, f) is not None else None)
+           for f in ("t", "applied_force_n", "slip_speed_rad_s", "sump_temperature_c", "torque_measured_nm",
+                     "pack_temperature_measured_c")}
+    base = replace(run, samples={}, **cut)
+    step = np.sign(base.slip_speed_rad_s) * SLIP_STEP_RAD_S
+    moved = replace(base, slip_speed_rad_s=base.slip_speed_rad_s + np.where(step == 0, SLIP_STEP_RAD_S, step))
+    pred = predict_campaign([model, model], Campaign([base]), energy0_j=0.0).torque_nm
+    pred2 = predict_campaign([model], Campaign([moved]), energy0_j=0.0).torque_nm[0]
+    slipping = np.abs(base.slip_speed_rad_s) > 1.0
+    dt = np.abs(pred2 - pred[0])[slipping]
+    dt = dt[np.isfinite(dt)]
+    return float(np.sqrt(np.mean(dt ** 2)) / SLIP_STEP_RAD_S) if dt.size else float("nan")
+
+
+def decide_input_smoothing(campaign, model, ratio: float = SMOOTHING_NOISE_RATIO) -> InputSmoothing:
+    """Smooth the slip when the measured torque is quieter at high frequencies than the slip
+    noise the model carries into its prediction (module docstring)."""
+    tq = [_samples(r, "measured_torque", r.torque_measured_nm) for r in campaign.runs
+          if r.torque_measured_nm is not None or "measured_torque" in r.samples]
+    sl = [_samples(r, "slip_speed_logged" if "slip_speed_logged" in r.samples else "slip_speed",
+                   r.slip_speed_rad_s) for r in campaign.runs]
+    h_torque = high_frequency_noise([y for _, y in tq])
+    h_slip = high_frequency_noise([y for _, y in sl])
+    per_slip = torque_per_slip(campaign, model) if np.isfinite(h_torque) and np.isfinite(h_slip) else float("nan")
+    smooth = bool(np.isfinite(per_slip) and h_torque < ratio * h_slip * per_slip)
+    return InputSmoothing(h_torque, h_slip, per_slip, smooth)
+
+
+def with_smoothed_slip(campaign, sigma_s: float = SLIP_SMOOTHING_S):
+    """The campaign (bag_reader.Campaign) with every run's slip smoothed (gaussian_smooth),
+    both its logged samples and the grid rows; the slip as logged is kept as
+    ``samples["slip_speed_logged"]`` for the lock-up detection (module docstring)."""
+    from clutch_model.formats.bag_reader import Campaign
+
+    runs = []
+    for run in campaign.runs:
+        samples = dict(run.samples)
+        if "slip_speed" in samples:
+            samples.setdefault("slip_speed_logged", samples["slip_speed"])
+            st, sv = samples["slip_speed_logged"]
+            samples["slip_speed"] = (st, gaussian_smooth(st, sv, sigma_s))
+        runs.append(replace(run, slip_speed_rad_s=gaussian_smooth(run.t, run.slip_speed_rad_s, sigma_s),
+                            samples=samples))
+    return Campaign(runs)
 
 
 def gaussian_smooth(t: np.ndarray, y: np.ndarray, sigma_s: float) -> np.ndarray:
@@ -83,25 +200,3 @@ def gaussian_smooth(t: np.ndarray, y: np.ndarray, sigma_s: float) -> np.ndarray:
     grid = t[0] + dt * np.arange(int(np.floor((t[-1] - t[0]) / dt)) + 2)
     smooth = gaussian_filter1d(np.interp(grid, t, y), sigma_s / dt, mode="nearest")
     return np.interp(t, grid, smooth)
-
-
-def with_smoothed_inputs(campaign, sigma_s: float = INPUT_SMOOTHING_S):
-    """The campaign (bag_reader.Campaign) with every run's applied force and slip smoothed
-    (gaussian_smooth), both their logged samples and the grid rows; the slip as logged is
-    kept as ``samples["slip_speed_logged"]`` (module docstring)."""
-    from clutch_model.formats.bag_reader import Campaign
-
-    runs = []
-    for run in campaign.runs:
-        samples = dict(run.samples)
-        if "applied_force" in samples:
-            st, sv = samples["applied_force"]
-            samples["applied_force"] = (st, gaussian_smooth(st, sv, sigma_s))
-        if "slip_speed" in samples:
-            samples.setdefault("slip_speed_logged", samples["slip_speed"])
-            st, sv = samples["slip_speed_logged"]
-            samples["slip_speed"] = (st, gaussian_smooth(st, sv, sigma_s))
-        runs.append(replace(run, applied_force_n=gaussian_smooth(run.t, run.applied_force_n, sigma_s),
-                            slip_speed_rad_s=gaussian_smooth(run.t, run.slip_speed_rad_s, sigma_s),
-                            samples=samples))
-    return Campaign(runs)

@@ -68,6 +68,7 @@ def report_dict(d: Diagnosis) -> dict:
         "timings_s": d.timings,
         "diagnosis_rate": d.diagnosis_rate,
         "diagnosis_sample": d.diagnosis_sample,
+        "inputs": d.inputs,
     })
 
 
@@ -213,7 +214,7 @@ class ProgressiveReport:
         if stage == "split":
             self._partial("split done; calibrating", held_out_runs=kw["split"].labels, split=kw["split"].how,
                           locked_rows=kw.get("locked_rows", 0), diagnosis_rate=kw.get("diagnosis_rate"),
-                          diagnosis_sample=kw.get("diagnosis_sample"))
+                          diagnosis_sample=kw.get("diagnosis_sample"), inputs=kw.get("inputs"))
         elif stage == "calibrated":
             header = "clutch-sim diagnose: calibrated baseline (bench fit + car calibration)"
             _save_model(kw["model"], self.out / "calibrated_model.yaml", header)

@@ -4,6 +4,7 @@ Reference: the plant simulated on a 1 kHz grid (the force held over 1 ms steps, 
 continuous force); on 50 Hz rows the force held from each row is 10 ms late on average, the
 midpoint force is not. The torque at the rows is compared with the 1 kHz reference there."""
 import numpy as np
+import pytest
 
 from clutch_model.diagnosis.input_hold import force_at_step_midpoints
 from clutch_model.plant.params import load_model
@@ -33,3 +34,104 @@ def test_midpoint_force_removes_the_half_step_lag():
     err_mid = np.sqrt(np.mean((mid - ref[rows])[late] ** 2))
     assert err_held > 1.0                                               # the hold is visibly late
     assert err_mid < 0.2 * err_held, (err_held, err_mid)
+
+
+# --- the slip smoothed without phase where the torque sensor is quiet (input_hold) -----------
+
+def _jittered_times(rng, rate_hz, duration_s, jitter_s):
+    t = np.arange(0.0, duration_s, 1.0 / rate_hz)
+    return np.sort(t + rng.uniform(-jitter_s, jitter_s, t.size))
+
+
+def test_smoothing_adds_no_delay_and_has_the_gaussian_gain():
+    """A 3 Hz sine on jittered 200 Hz stamps comes out in phase, scaled by the Gaussian
+    kernel's gain exp(-2 pi^2 sigma^2 f^2) (0.996); a 60 Hz one, also in phase, at most to
+    that gain (0.17; the linear resampling on and off the uniform grid takes a little more)."""
+    from clutch_model.diagnosis.input_hold import SLIP_SMOOTHING_S, gaussian_smooth
+
+    rng = np.random.default_rng(3)
+    t = _jittered_times(rng, 200.0, 6.0, 1e-3)
+    inner = (t > 0.5) & (t < 5.5)
+    for f_hz in (3.0, 60.0):
+        gain = np.exp(-2 * np.pi ** 2 * SLIP_SMOOTHING_S ** 2 * f_hz ** 2)
+        y = gaussian_smooth(t, np.sin(2 * np.pi * f_hz * t), SLIP_SMOOTHING_S)
+        # least squares on sin and cos: the cos part is the phase
+        basis = np.column_stack([np.sin(2 * np.pi * f_hz * t), np.cos(2 * np.pi * f_hz * t)])[inner]
+        (a, b), *_ = np.linalg.lstsq(basis, y[inner], rcond=None)
+        if f_hz < 10:
+            assert a == pytest.approx(gain, rel=0.01), (f_hz, a, gain)
+        else:
+            assert 0.05 < a < 1.05 * gain, (f_hz, a, gain)
+        assert abs(np.arctan2(b, a)) < 0.02, (f_hz, b)      # 0.02 rad at 60 Hz: 53 us
+
+
+def test_high_frequency_noise_of_the_noise_classes():
+    """White-equivalent noise near Nyquist: white noise of sd 8 reads 8; a first-order
+    low-pass of sd 8 (tau 50 ms at 200 Hz) its Nyquist level, 1.8; a value held over 20
+    samples 0; a smooth signal added changes none of them much."""
+    from scipy.signal import lfilter
+
+    from clutch_model.diagnosis.input_hold import high_frequency_noise
+
+    rng = np.random.default_rng(11)
+    t = np.arange(0.0, 30.0, 0.005)
+    smooth = 300.0 * np.sin(2 * np.pi * 0.7 * t) + 100.0 * np.sin(2 * np.pi * 2.1 * t)
+    white = rng.normal(0.0, 8.0, t.size)
+    a = np.exp(-0.005 / 0.05)
+    low = lfilter([1 - a], [1, -a], white) * np.sqrt((1 + a) / (1 - a))     # sd 8 again
+    held = np.repeat(rng.normal(0.0, 8.0, t.size // 20 + 1), 20)[:t.size]
+    assert high_frequency_noise([white]) == pytest.approx(8.0, rel=0.05)
+    assert high_frequency_noise([smooth + white]) == pytest.approx(8.0, rel=0.05)
+    assert np.std(low) == pytest.approx(8.0, rel=0.15)
+    # at Nyquist the first-order filter passes (1 - a) / (1 + a) of the white input's sd
+    assert high_frequency_noise([smooth + low]) == pytest.approx(8.0 * np.sqrt((1 - a) / (1 + a)), rel=0.1)
+    assert high_frequency_noise([smooth + held]) < 0.1
+
+
+def _campaign(torque_noise, seed=5):
+    from clutch_model.formats.bag_reader import Campaign, Run
+
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, 20.0, 0.005)
+    slip = np.where((t > 8) & (t < 11), 0.0, 5.0 + 3.0 * np.sin(2 * np.pi * 0.2 * t)) + rng.normal(0.0, 0.05, t.size)
+    force = 4000.0 + 2000.0 * np.sin(2 * np.pi * 0.3 * t)
+    torque = 0.05 * force + torque_noise(rng, t.size)
+    run = Run("r", t, force, slip, np.full(t.size, 60.0), torque_measured_nm=torque,
+              samples={"applied_force": (t, force), "slip_speed": (t, slip), "measured_torque": (t, torque)})
+    return Campaign([run]), slip
+
+
+def test_slip_smoothed_only_under_a_quiet_torque_sensor_and_logged_slip_kept_for_lockup():
+    """White torque noise: inputs as logged. A torque reading held at 10 Hz (quiet near
+    Nyquist): the slip is smoothed, its white noise variance cut to 1 / (2 sqrt(pi) sigma/dt);
+    the slip as logged stays under slip_speed_logged, and the lock-up detection, which
+    estimates the slip sensor's noise from it, reads the same noise and phases as on the raw
+    samples."""
+    from clutch_model.diagnosis.input_hold import decide_input_smoothing, with_smoothed_slip
+    from clutch_model.diagnosis.lockup import detect_lockup, detect_lockup_run
+    from clutch_model.plant.params import load_model
+
+    model = load_model(None)
+    white, _ = _campaign(lambda rng, n: rng.normal(0.0, 8.0, n))
+    decision = decide_input_smoothing(white, model)
+    assert not decision.smoothed
+    assert decision.torque_noise_hf_nm == pytest.approx(8.0, rel=0.1)
+    assert decision.slip_noise_in_torque_nm > 0.0
+    held, slip = _campaign(lambda rng, n: np.repeat(rng.normal(0.0, 8.0, n // 20 + 1), 20)[:n])
+    decision = decide_input_smoothing(held, model)
+    assert decision.smoothed, decision.describe()
+
+    (out,) = with_smoothed_slip(held, decision.sigma_s).runs
+    t = out.t
+    noise = slip - np.where((t > 8) & (t < 11), 0.0, 5.0 + 3.0 * np.sin(2 * np.pi * 0.2 * t))
+    smoothed_noise = out.slip_speed_rad_s - (slip - noise)
+    expected = 1.0 / (2.0 * np.sqrt(np.pi) * decision.sigma_s / 0.005)
+    inner = (t > 1) & (t < 19) & (np.abs(t - 8) > 0.1) & (np.abs(t - 11) > 0.1)
+    assert np.var(smoothed_noise[inner]) / np.var(noise[inner]) == pytest.approx(expected, rel=0.15)
+    assert np.array_equal(out.samples["slip_speed"][1], out.slip_speed_rad_s)
+    assert np.array_equal(out.samples["slip_speed_logged"][1], slip)
+    assert np.array_equal(out.applied_force_n, held.runs[0].applied_force_n)
+    raw, seen = detect_lockup(t, slip), detect_lockup_run(out)
+    assert seen.noise_sigma_rad_s == raw.noise_sigma_rad_s
+    assert np.array_equal(seen.at(t), raw.at(t))
+    assert raw.at(t)[(t > 8.5) & (t < 10.5)].all()
