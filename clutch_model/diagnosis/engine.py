@@ -35,10 +35,10 @@ from clutch_model.diagnosis.measured_time import measured_time_campaign, topics_
 from clutch_model.plant.simulate import SimResult
 from clutch_model.diagnosis import features as F
 from clutch_model.diagnosis.candidates import CampaignContext, MechanismCandidate, baseline_fit
-from clutch_model.diagnosis.input_hold import decide_input_smoothing, with_midpoint_force, with_smoothed_slip
+from clutch_model.diagnosis.input_hold import decide_input_noise, with_midpoint_force, with_smoothed_slip
 from clutch_model.diagnosis.lockup import without_locked_torque
 from clutch_model.diagnosis.fitting import CANDIDATE_IDS, CandidateFit, fit_candidate
-from clutch_model.diagnosis.noise_model import fit_noise_model
+from clutch_model.diagnosis.noise_model import fit_noise_model, white_floor
 from clutch_model.diagnosis.selection import Selection, SelectionData, _resid, select_causes
 from clutch_model.diagnosis.split import Split, choose_split
 from clutch_model.diagnosis import sample as S
@@ -261,10 +261,10 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
     del runs                      # long logs: the native rows go once regridded / decimated
     # a torque sensor quieter at high frequencies than the slip noise the model carries into its
     # prediction: the plant is driven by the slip smoothed without phase (input_hold)
-    smoothing = decide_input_smoothing(campaign, nominal)
-    say(smoothing.describe())
-    if smoothing.smoothed:
-        campaign = with_smoothed_slip(campaign, smoothing.sigma_s)
+    input_noise = decide_input_noise(campaign, nominal)
+    say(input_noise.describe())
+    if input_noise.smoothed:
+        campaign = with_smoothed_slip(campaign, input_noise.sigma_s)
     if measured_time is None:
         measured_time = topics_unaligned(campaign.runs)
     if measured_time:
@@ -290,7 +290,7 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
     args = dict(nominal=nominal, bench_model=bench_model, held_out=held_out, candidates=candidates,
                 calibrate=calibrate, say=say, emit=emit, discover=discover, fit_executor=fit_executor,
                 sample_budget_s=sample_budget_s, plan=plan, timings=timings, tick=tick, bench_info=bench_info,
-                inputs=smoothing.to_dict())
+                inputs=input_noise.to_dict())
     d = _diagnose_masked(campaign, locked, **args)
     # a named delay or torque-sensor lag carries each lock phase's driveline torque into the
     # measured torque after it, where no clutch model can follow: those rows are left out too,
@@ -383,7 +383,13 @@ def with_lock_tail(campaign: Campaign, lock_results: list, tail_s: float) -> tup
     return Campaign(runs), np.concatenate(more) if more else np.zeros(0, bool)
 
 
-def _diagnose_masked(campaign: Campaign, locked: np.ndarray, *, nominal, bench_model, held_out, candidates,
+def _diagnose_masked(campaign: Campaign, locked: np.ndarray, **kw) -> "Diagnosis":
+    """_diagnose_floored with every noise model floored at the model's own noise (input_hold)."""
+    with white_floor(kw["inputs"].get("noise_floor_nm", 0.0) ** 2):
+        return _diagnose_floored(campaign, locked, **kw)
+
+
+def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_model, held_out, candidates,
                      calibrate, say, emit, discover, fit_executor, sample_budget_s, plan, timings,
                      tick, bench_info, inputs) -> "Diagnosis":
     """Stages 1 (split) to 4 of ``diagnose_campaign`` on a campaign whose locked rows are

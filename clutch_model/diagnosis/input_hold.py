@@ -77,6 +77,7 @@ SMOOTHING_NOISE_RATIO = 2.0   # smooth when the torque's high-frequency noise is
                               # times the slip noise's part of the predicted torque
 SENSITIVITY_WINDOW_S = 20.0   # rows of the first run the torque's slip sensitivity is taken on
 SLIP_STEP_RAD_S = 0.1
+NOISE_FLOOR_FACTOR = 2.5      # noise models floored at this many times the model's own noise
 HF_DIFFERENCE_ORDER = 4       # 4th differences: the top of the band (gain 16 sin^4(w/2))
 
 
@@ -96,13 +97,14 @@ def high_frequency_noise(y_runs, order: int = HF_DIFFERENCE_ORDER) -> float:
 
 
 @dataclass
-class InputSmoothing:
-    """Whether the diagnosis smooths the measured slip before driving the plant with it, and
-    the figures it decided on (module docstring)."""
+class InputNoise:
+    """What the measured inputs' noise does to the model's prediction, and what the diagnosis
+    does about it: the slip smoothed or not, the noise models' white floor (module docstring)."""
 
-    torque_noise_hf_nm: float          # the measured torque's high-frequency noise
+    torque_noise_hf_nm: float          # the measured torque's noise near Nyquist
     slip_noise_hf_rad_s: float         # the slip sensor's
     torque_per_slip_nm_s: float        # rms dT/d(slip) of the model on slipping rows
+    model_noise_hf_nm: float           # the model torque's own noise near Nyquist (inputs as logged)
     smoothed: bool
     sigma_s: float = SLIP_SMOOTHING_S
 
@@ -110,15 +112,23 @@ class InputSmoothing:
     def slip_noise_in_torque_nm(self) -> float:
         return self.slip_noise_hf_rad_s * self.torque_per_slip_nm_s
 
+    @property
+    def noise_floor_nm(self) -> float:
+        """White floor of every noise model of the diagnosis (noise_model.white_floor)."""
+        v = NOISE_FLOOR_FACTOR * self.model_noise_hf_nm
+        return float(v) if np.isfinite(v) else 0.0
+
     def describe(self) -> str:
         what = (f"slip smoothed without phase ({1e3 * self.sigma_s:.0f} ms Gaussian)" if self.smoothed
                 else "inputs as logged")
-        return (f"inputs: {what}: the torque's high-frequency noise {self.torque_noise_hf_nm:.2f} N*m, "
-                f"the slip noise's part of the model torque {self.slip_noise_in_torque_nm:.2f} N*m")
+        return (f"inputs: {what}; noise floor {self.noise_floor_nm:.2f} N*m (the torque's noise near "
+                f"Nyquist {self.torque_noise_hf_nm:.2f} N*m, the model's {self.model_noise_hf_nm:.2f} N*m, "
+                f"of which the slip noise {self.slip_noise_in_torque_nm:.2f} N*m)")
 
     def to_dict(self) -> dict:
         return {"slip_smoothed": self.smoothed, "sigma_s": self.sigma_s if self.smoothed else 0.0,
-                "torque_noise_hf_nm": self.torque_noise_hf_nm,
+                "noise_floor_nm": self.noise_floor_nm, "torque_noise_hf_nm": self.torque_noise_hf_nm,
+                "model_noise_hf_nm": self.model_noise_hf_nm,
                 "slip_noise_in_torque_nm": self.slip_noise_in_torque_nm}
 
 
@@ -127,43 +137,52 @@ def _samples(run, channel, grid_values):
     return (s[0], s[1]) if s is not None else (run.t, grid_values)
 
 
-def torque_per_slip(campaign, model, window_s: float = SENSITIVITY_WINDOW_S) -> float:
-    """Root mean square of d(predicted torque)/d(slip) (N*m per rad/s) of ``model`` on the slipping rows of
-    the first ``window_s`` of the campaign's first run (two simulations, the slip moved by
-    SLIP_STEP_RAD_S)."""
+def model_input_noise(campaign, model, window_s: float = SENSITIVITY_WINDOW_S) -> tuple:
+    """(rms of d(predicted torque)/d(slip) in N*m per rad/s on slipping rows, the predicted
+    torque's noise near Nyquist at the measured torque's stamps in N*m) of ``model`` on the
+    first ``window_s`` of the campaign's first run (two simulations, the second with the slip
+    moved by SLIP_STEP_RAD_S)."""
     from clutch_model.formats.bag_reader import Campaign
     from clutch_model.prediction import predict_campaign
 
     run = campaign.runs[0]
     keep = run.t <= run.t[0] + window_s
     if keep.sum() < 10:
-        return float("nan")
+        return float("nan"), float("nan")
     cut = {f: (getattr(run, f)[keep] if getattr(run, f) is not None else None)
            for f in ("t", "applied_force_n", "slip_speed_rad_s", "sump_temperature_c", "torque_measured_nm",
                      "pack_temperature_measured_c")}
     base = replace(run, samples={}, **cut)
     step = np.sign(base.slip_speed_rad_s) * SLIP_STEP_RAD_S
     moved = replace(base, slip_speed_rad_s=base.slip_speed_rad_s + np.where(step == 0, SLIP_STEP_RAD_S, step))
-    pred = predict_campaign([model, model], Campaign([base]), energy0_j=0.0).torque_nm
-    pred2 = predict_campaign([model], Campaign([moved]), energy0_j=0.0).torque_nm[0]
+    pred = predict_campaign(model, Campaign([base]), energy0_j=0.0).torque_nm
+    pred2 = predict_campaign(model, Campaign([moved]), energy0_j=0.0).torque_nm
     slipping = np.abs(base.slip_speed_rad_s) > 1.0
-    dt = np.abs(pred2 - pred[0])[slipping]
+    dt = np.abs(pred2 - pred)[slipping]
     dt = dt[np.isfinite(dt)]
-    return float(np.sqrt(np.mean(dt ** 2)) / SLIP_STEP_RAD_S) if dt.size else float("nan")
+    slope = float(np.sqrt(np.mean(dt ** 2)) / SLIP_STEP_RAD_S) if dt.size else float("nan")
+    tq_t, _ = _samples(run, "measured_torque", run.torque_measured_nm if run.torque_measured_nm is not None
+                       else np.zeros(run.t.size))
+    tq_t = tq_t[(tq_t >= base.t[0]) & (tq_t <= base.t[-1])]
+    ok = np.isfinite(pred)
+    at = np.interp(tq_t, base.t[ok], pred[ok]) if ok.sum() > 1 else np.zeros(0)
+    return slope, high_frequency_noise([at])
 
 
-def decide_input_smoothing(campaign, model, ratio: float = SMOOTHING_NOISE_RATIO) -> InputSmoothing:
-    """Smooth the slip when the measured torque is quieter at high frequencies than the slip
-    noise the model carries into its prediction (module docstring)."""
+def decide_input_noise(campaign, model, ratio: float = SMOOTHING_NOISE_RATIO) -> InputNoise:
+    """Smooth the slip when the measured torque is quieter near Nyquist than the slip noise the
+    model carries into its prediction; floor the noise models at the model's own noise
+    (module docstring)."""
     tq = [_samples(r, "measured_torque", r.torque_measured_nm) for r in campaign.runs
           if r.torque_measured_nm is not None or "measured_torque" in r.samples]
     sl = [_samples(r, "slip_speed_logged" if "slip_speed_logged" in r.samples else "slip_speed",
                    r.slip_speed_rad_s) for r in campaign.runs]
     h_torque = high_frequency_noise([y for _, y in tq])
     h_slip = high_frequency_noise([y for _, y in sl])
-    per_slip = torque_per_slip(campaign, model) if np.isfinite(h_torque) and np.isfinite(h_slip) else float("nan")
-    smooth = bool(np.isfinite(per_slip) and h_torque < ratio * h_slip * per_slip)
-    return InputSmoothing(h_torque, h_slip, per_slip, smooth)
+    slope, h_model = model_input_noise(campaign, model)
+    smooth = bool(np.isfinite(slope) and np.isfinite(h_torque) and np.isfinite(h_slip)
+                  and h_torque < ratio * h_slip * slope)
+    return InputNoise(h_torque, h_slip, slope, h_model, smooth)
 
 
 def with_smoothed_slip(campaign, sigma_s: float = SLIP_SMOOTHING_S):

@@ -22,6 +22,8 @@ project, and the recursion is a few lines of numpy).
 from __future__ import annotations
 
 import math
+from contextlib import contextmanager
+from contextvars import ContextVar
 from dataclasses import dataclass
 
 import numpy as np
@@ -194,6 +196,21 @@ def _levinson(g: np.ndarray, order: int):
     return filters, np.array(var)
 
 
+_FLOOR_VARIANCE: ContextVar = ContextVar("noise_floor_variance", default=0.0)
+
+
+@contextmanager
+def white_floor(variance: float):
+    """Within the block, every fitted noise model is floored with white noise of ``variance``
+    (``with_white_floor``): the diagnosis's floor for the noise its model carries from its
+    measured inputs (diagnosis.input_hold)."""
+    token = _FLOOR_VARIANCE.set(max(float(variance), 0.0) if np.isfinite(variance) else 0.0)
+    try:
+        yield
+    finally:
+        _FLOOR_VARIANCE.reset(token)
+
+
 def with_white_floor(nm: "NoiseModel", floor_variance: float) -> "NoiseModel":
     """The AR approximation (same order) of the noise model's spectrum plus white noise of
     ``floor_variance``: its one-step predictions can never be better than that floor."""
@@ -229,6 +246,4 @@ def fit_noise_model(x: np.ndarray, run_start: np.ndarray | None = None, mask: np
     p = int(np.argmin(ic))
     nm = NoiseModel(a=filters[p], innovation_variance=float(var[p]), lattice=filters[:p + 1],
                     order_variance=var[:p + 1], n_samples=n, bic=float(ic[p]))
-    import os
-    fl = float(os.environ.get("NOISE_FLOOR_NM", "0"))
-    return with_white_floor(nm, fl * fl) if fl > 0 else nm
+    return with_white_floor(nm, _FLOOR_VARIANCE.get())
