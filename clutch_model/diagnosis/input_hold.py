@@ -78,22 +78,34 @@ SMOOTHING_NOISE_RATIO = 2.0   # smooth when the torque's high-frequency noise is
 SENSITIVITY_WINDOW_S = 20.0   # rows of the first run the torque's slip sensitivity is taken on
 SLIP_STEP_RAD_S = 0.1
 NOISE_FLOOR_FACTOR = 2.5      # noise models floored at this many times the model's own noise
+HF_TRIM = 0.05                # share of the largest differences left out of the mean square
 HF_DIFFERENCE_ORDER = 4       # 4th differences: the top of the band (gain 16 sin^4(w/2))
 
 
-def high_frequency_noise(y_runs, order: int = HF_DIFFERENCE_ORDER) -> float:
+def high_frequency_noise(y_runs, order: int = HF_DIFFERENCE_ORDER, typical: bool = False) -> float:
     """White-equivalent standard deviation of a signal's noise near its sampling rate's Nyquist
-    frequency, robust to its smooth part and to transients: 1.4826 MAD of its ``order``-th
-    differences / sqrt(C(2 order, order)), pooled over runs. White noise of sd s gives s; on
-    200 Hz samples an AR(1) 0.95 noise of sd 8 gives 1.35, a 10 Hz band-limited one 0.18, one
-    drawn at 10 Hz and held 0."""
+    frequency, from its ``order``-th differences pooled over runs, scaled so white noise of sd s
+    gives s. Its power (default): their mean square with the top HF_TRIM left out (a transient
+    of the signal is not noise); on 200 Hz samples an AR(1) 0.95 noise of sd 8 gives 1.36, a
+    10 Hz band-limited one 0.18, one drawn at 10 Hz and held 0.64 (its jumps). ``typical``:
+    1.4826 MAD instead, the typical difference's (the held noise: 0), robust to a signal with
+    many transients (a model's engagements)."""
     from math import comb
+
+    from scipy.stats import norm
 
     d = [np.diff(np.asarray(y, float)[np.isfinite(y)], order) for y in y_runs]
     d = np.concatenate([x for x in d if x.size]) if any(x.size for x in d) else np.zeros(0)
     if d.size < 10:
         return float("nan")
-    return float(1.4826 * np.median(np.abs(d - np.median(d))) / np.sqrt(comb(2 * order, order)))
+    d = d - np.median(d)
+    if typical:
+        return float(1.4826 * np.median(np.abs(d)) / np.sqrt(comb(2 * order, order)))
+    kept = np.sort(d * d)[:max(1, int(round((1.0 - HF_TRIM) * d.size)))]
+    # a standard normal's mean square below its (1 - HF_TRIM) quantile of |x|
+    q = norm.ppf(1.0 - HF_TRIM / 2.0)
+    normal_kept = 1.0 - 2.0 * q * norm.pdf(q) / (1.0 - HF_TRIM)
+    return float(np.sqrt(np.mean(kept) / normal_kept / comb(2 * order, order)))
 
 
 @dataclass
@@ -166,7 +178,7 @@ def model_input_noise(campaign, model, window_s: float = SENSITIVITY_WINDOW_S) -
     tq_t = tq_t[(tq_t >= base.t[0]) & (tq_t <= base.t[-1])]
     ok = np.isfinite(pred)
     at = np.interp(tq_t, base.t[ok], pred[ok]) if ok.sum() > 1 else np.zeros(0)
-    return slope, high_frequency_noise([at])
+    return slope, high_frequency_noise([at], typical=True)
 
 
 def decide_input_noise(campaign, model, ratio: float = SMOOTHING_NOISE_RATIO) -> InputNoise:

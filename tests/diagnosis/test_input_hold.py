@@ -107,18 +107,18 @@ def test_slip_smoothed_only_under_a_quiet_torque_sensor_and_logged_slip_kept_for
     the slip as logged stays under slip_speed_logged, and the lock-up detection, which
     estimates the slip sensor's noise from it, reads the same noise and phases as on the raw
     samples."""
-    from clutch_model.diagnosis.input_hold import decide_input_smoothing, with_smoothed_slip
+    from clutch_model.diagnosis.input_hold import decide_input_noise, with_smoothed_slip
     from clutch_model.diagnosis.lockup import detect_lockup, detect_lockup_run
     from clutch_model.plant.params import load_model
 
     model = load_model(None)
     white, _ = _campaign(lambda rng, n: rng.normal(0.0, 8.0, n))
-    decision = decide_input_smoothing(white, model)
+    decision = decide_input_noise(white, model)
     assert not decision.smoothed
     assert decision.torque_noise_hf_nm == pytest.approx(8.0, rel=0.1)
     assert decision.slip_noise_in_torque_nm > 0.0
     held, slip = _campaign(lambda rng, n: np.repeat(rng.normal(0.0, 8.0, n // 20 + 1), 20)[:n])
-    decision = decide_input_smoothing(held, model)
+    decision = decide_input_noise(held, model)
     assert decision.smoothed, decision.describe()
 
     (out,) = with_smoothed_slip(held, decision.sigma_s).runs

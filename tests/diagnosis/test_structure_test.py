@@ -201,3 +201,28 @@ def test_per_run_friction_level_is_found_within_each_run(kind):
             beyond = effect - np.bincount(run, effect)[run] / np.bincount(run)[run]
             assert np.corrcoef(res.prediction[test], beyond[test])[0, 1] > 0.6, (kind, seed)
     assert found >= len(SEEDS) - 1, (kind, found)
+
+
+def test_white_floor_is_the_ar_approximation_of_the_spectrum_plus_white_noise():
+    """An AR(1) 0.95 noise model floored with white noise: its innovation variance is the
+    optimal one-step error of the spectrum S_AR + floor (Kolmogorov-Szego: exp of the mean log
+    spectrum) within 1 %; a floor of 0 leaves it as fitted; inside ``white_floor`` every fitted
+    noise model carries the floor, and outside it none does."""
+    from scipy.signal import lfilter
+
+    from clutch_model.diagnosis.noise_model import fit_noise_model, white_floor, with_white_floor
+
+    rng = np.random.default_rng(4)
+    x = lfilter([1.0], [1.0, -0.95], rng.normal(0.0, 2.5, 40000))
+    nm = fit_noise_model(x)
+    assert with_white_floor(nm, 0.0) is nm
+    phi = -nm.a[1]
+    w = np.linspace(1e-5, np.pi, 200001)
+    spectrum = nm.innovation_variance / np.abs(1.0 - phi * np.exp(-1j * w)) ** 2 + 4.0
+    floored = with_white_floor(nm, 4.0)
+    assert floored.innovation_variance == pytest.approx(np.exp(np.mean(np.log(spectrum))), rel=0.01)
+    assert floored.variance == pytest.approx(nm.variance + 4.0, rel=1e-9)
+    with white_floor(4.0):
+        inside = fit_noise_model(x)
+    assert inside.innovation_variance == pytest.approx(floored.innovation_variance, rel=1e-12)
+    assert fit_noise_model(x).innovation_variance == pytest.approx(nm.innovation_variance, rel=1e-12)
