@@ -68,7 +68,8 @@ def test_smoothing_adds_no_delay_and_has_the_gaussian_gain():
 def test_high_frequency_noise_of_the_noise_classes():
     """White-equivalent noise near Nyquist: white noise of sd 8 reads 8; a first-order
     low-pass of sd 8 (tau 50 ms at 200 Hz) its Nyquist level, 1.8; a value held over 20
-    samples 0; a smooth signal added changes none of them much."""
+    samples has power there (its jumps) but its typical difference is 0; a smooth signal added
+    changes none of them much."""
     from scipy.signal import lfilter
 
     from clutch_model.diagnosis.input_hold import high_frequency_noise
@@ -85,7 +86,9 @@ def test_high_frequency_noise_of_the_noise_classes():
     assert np.std(low) == pytest.approx(8.0, rel=0.15)
     # at Nyquist the first-order filter passes (1 - a) / (1 + a) of the white input's sd
     assert high_frequency_noise([smooth + low]) == pytest.approx(8.0 * np.sqrt((1 - a) / (1 + a)), rel=0.1)
-    assert high_frequency_noise([smooth + held]) < 0.1
+    assert high_frequency_noise([smooth + held], typical=True) < 0.1
+    assert high_frequency_noise([smooth + held]) > 0.3
+    assert high_frequency_noise([smooth + white], typical=True) == pytest.approx(8.0, rel=0.05)
 
 
 def _campaign(torque_noise, seed=5):
@@ -102,11 +105,13 @@ def _campaign(torque_noise, seed=5):
 
 
 def test_slip_smoothed_only_under_a_quiet_torque_sensor_and_logged_slip_kept_for_lockup():
-    """White torque noise: inputs as logged. A torque reading held at 10 Hz (quiet near
+    """White torque noise: inputs as logged. Torque noise band-limited to 5 Hz (quiet near
     Nyquist): the slip is smoothed, its white noise variance cut to 1 / (2 sqrt(pi) sigma/dt);
     the slip as logged stays under slip_speed_logged, and the lock-up detection, which
     estimates the slip sensor's noise from it, reads the same noise and phases as on the raw
     samples."""
+    from scipy.signal import butter, sosfilt
+
     from clutch_model.diagnosis.input_hold import decide_input_noise, with_smoothed_slip
     from clutch_model.diagnosis.lockup import detect_lockup, detect_lockup_run
     from clutch_model.plant.params import load_model
@@ -117,11 +122,12 @@ def test_slip_smoothed_only_under_a_quiet_torque_sensor_and_logged_slip_kept_for
     assert not decision.smoothed
     assert decision.torque_noise_hf_nm == pytest.approx(8.0, rel=0.1)
     assert decision.slip_noise_in_torque_nm > 0.0
-    held, slip = _campaign(lambda rng, n: np.repeat(rng.normal(0.0, 8.0, n // 20 + 1), 20)[:n])
-    decision = decide_input_noise(held, model)
+    band = butter(4, 5.0, fs=200.0, output="sos")
+    quiet, slip = _campaign(lambda rng, n: 8.0 * sosfilt(band, rng.normal(0.0, 3.0, n)))
+    decision = decide_input_noise(quiet, model)
     assert decision.smoothed, decision.describe()
 
-    (out,) = with_smoothed_slip(held, decision.sigma_s).runs
+    (out,) = with_smoothed_slip(quiet, decision.sigma_s).runs
     t = out.t
     noise = slip - np.where((t > 8) & (t < 11), 0.0, 5.0 + 3.0 * np.sin(2 * np.pi * 0.2 * t))
     smoothed_noise = out.slip_speed_rad_s - (slip - noise)
@@ -130,7 +136,7 @@ def test_slip_smoothed_only_under_a_quiet_torque_sensor_and_logged_slip_kept_for
     assert np.var(smoothed_noise[inner]) / np.var(noise[inner]) == pytest.approx(expected, rel=0.15)
     assert np.array_equal(out.samples["slip_speed"][1], out.slip_speed_rad_s)
     assert np.array_equal(out.samples["slip_speed_logged"][1], slip)
-    assert np.array_equal(out.applied_force_n, held.runs[0].applied_force_n)
+    assert np.array_equal(out.applied_force_n, quiet.runs[0].applied_force_n)
     raw, seen = detect_lockup(t, slip), detect_lockup_run(out)
     assert seen.noise_sigma_rad_s == raw.noise_sigma_rad_s
     assert np.array_equal(seen.at(t), raw.at(t))
