@@ -1,27 +1,40 @@
-"""The inputs the diagnosis gives the plant: the slip smoothed where the torque sensor is
-quieter than its noise, the force at each step's midpoint.
+"""The inputs the diagnosis gives the plant and the noise they carry into it: the slip
+smoothed where the torque sensor is quieter than that noise, the noise models floored at it,
+the force at each step's midpoint.
 
-The slip smoothed (``decide_input_smoothing``, ``with_smoothed_slip``). The model is driven by
-the measured slip, sensor noise included, and that noise reaches the predicted torque through
-the friction curve's slope and the viscous terms (0.05 rad/s of white slip noise: ~0.2 N*m at
-the top of the band on the virtual car), where the measured torque, made from the true slip,
-has none of it. Against a white or AR(1) torque noise that is immaterial. Against a torque
-sensor that is quiet at high frequencies (a 10 Hz band limit, a reading held at 10 Hz) the
-whitened one-step errors weigh exactly the frequencies where the model carries that noise, and a
-candidate that smooths the model's output gains there whatever it means: on
-actuator_lag@lowpass#1 (a 70 ms actuator lag) the torque-sensor lag won at held-out t = 693
-against 37 and was named. So the diagnosis measures both: the torque's noise near the Nyquist
-frequency (``high_frequency_noise``, robust 4th differences) and the slip's, carried into the
-torque by the model's rms slope dT/d(slip) on the first run (``torque_per_slip``). When the
-torque's is below SMOOTHING_NOISE_RATIO times the slip noise's part, the plant is driven by the
-slip smoothed with a 5 ms Gaussian (-3 dB at 25 Hz, zero phase: no delay added); then the
-actuator lag wins head to head and is named. Not smoothed under white, AR(1) or drift noise:
-there the smoothing took information with the noise (torque_sensor_lag@ar1#1 became a lookalike
-of actuator_lag, drag_torque@ar1#1 read none). The force is not smoothed: its noise moves the
-torque less at high frequencies and its edges carry the lag family's evidence. The slip as
-logged stays in the run's samples (``slip_speed_logged``) for the lock-up detection, which
-estimates the slip sensor's noise from it. Replay is not changed; report.json's ``inputs``
-gives the figures and the decision.
+The model's own noise (``decide_input_noise``, ``InputNoise``). The model is driven by the
+measured slip and force, sensor noise included, and that noise reaches the predicted torque
+through the friction curve's slope and the viscous terms (0.05 rad/s of white slip noise:
+~0.2 N*m near Nyquist on the virtual car) where the measured torque, made from the true
+inputs, has none of it. Against a white or AR(1) torque noise that is immaterial. Against a
+torque sensor that is quiet at high frequencies (a 10 Hz band limit) the noise model's
+innovation variance is a fraction of a percent of the noise variance, the whitened one-step
+errors weigh exactly the frequencies where the model carries that noise, and a candidate that
+smooths the model's output gains there whatever it means: on actuator_lag@lowpass#1 (a 70 ms
+actuator lag) the torque-sensor lag won at held-out t = 693 against 37 and was named. Two
+measures, both from figures of the data:
+
+- every noise model of the diagnosis gets a white floor (``noise_model.white_floor``) of
+  NOISE_FLOOR_FACTOR times the model torque's own typical noise near Nyquist (the nominal
+  model on the first run's first 20 s, at the measured torque's stamps): no comparison may
+  weigh a frequency by more than the model's own noise allows (0.48 N*m on the virtual car;
+  against 8 N*m of white torque noise it changes nothing);
+- when the measured torque's noise power near Nyquist (``high_frequency_noise``: trimmed mean
+  square of 4th differences) is below SMOOTHING_NOISE_RATIO times the slip noise's part of
+  the model torque (the slip sensor's noise times the model's rms slope dT/d(slip),
+  ``model_input_noise``), the plant is driven by the slip smoothed with a 5 ms Gaussian (-3 dB
+  at 25 Hz, zero phase: no delay added).
+
+With both, actuator_lag@lowpass#1 names the actuator lag (t = 53 against 45 for the sensor
+lag, head to head won); with the floor alone the sensor lag still won head to head, with the
+smoothing alone a campaign with nothing hidden under the same noise named a hysteresis. A
+10 Hz band-limited torque noise is smoothed (0.17 N*m near Nyquist against 2 x 0.22); white,
+AR(1), drift, median-filtered and held noise are not (a torque reading held at 10 Hz has the
+power of its jumps there, 0.62 N*m; smoothed, its true torque-sensor lags read as lookalikes of
+an actuator lag). The force is not smoothed: its noise moves the torque less near Nyquist and
+its edges carry the lag family's evidence. The slip as logged stays in the run's samples
+(``slip_speed_logged``) for the lock-up detection, which estimates the slip sensor's noise
+from it. Replay is not changed; report.json's ``inputs`` gives the figures and the decision.
 
 The force at each step's midpoint (``with_midpoint_force``).
 
