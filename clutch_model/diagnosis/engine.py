@@ -39,7 +39,7 @@ from clutch_model.diagnosis.input_hold import decide_input_noise, with_midpoint_
 from clutch_model.diagnosis.lockup import without_locked_torque
 from clutch_model.diagnosis.fitting import CANDIDATE_IDS, CandidateFit, fit_candidate
 from clutch_model.diagnosis.noise_model import fit_noise_model, white_floor
-from clutch_model.diagnosis.selection import Selection, SelectionData, _resid, select_causes
+from clutch_model.diagnosis.selection import Selection, SelectionData, residual, select_causes
 from clutch_model.diagnosis.split import Split, choose_split
 from clutch_model.diagnosis import sample as S
 from clutch_model.diagnosis.sample import DEFAULT_BUDGET_S
@@ -719,8 +719,8 @@ def _degradation_or_fade(data: SelectionData, base, campaign: Campaign, bench_mo
     found = dsel.causes[0] if dsel.verdict == "named" and dsel.causes else None
     if found is None or not found.parameters:
         return sel, None
-    r_deg = _resid(data, sel.final)
-    r_fade = _resid(data, found.fitted)
+    r_deg = residual(data, sel.final)
+    r_fade = residual(data, found.fitted)
     fade_better = compare_residuals(r_deg, r_fade, data.train_mask, data.test_mask, data.run_start, data.t)
     deg_better = compare_residuals(r_fade, r_deg, data.train_mask, data.test_mask, data.run_start, data.t)
     say(f"friction_degradation vs reversible fade on held-out rows: fade t = {fade_better.t_stat:.1f}, "

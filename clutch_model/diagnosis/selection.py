@@ -116,6 +116,7 @@ class SelectionStep:
     scores: list                    # CandidateScore, best first
     chosen: str | None
     lookalikes: list                # ids the chosen one could not be told apart from
+    replaced_by: str | None = None  # the rival that took the chosen one's place (swap check)
 
 
 @dataclass
@@ -189,7 +190,7 @@ def sub_row_timing(data: SelectionData, predicted: np.ndarray, resid: np.ndarray
     return c * dp
 
 
-def _resid(data: SelectionData, fitted) -> np.ndarray:
+def residual(data: SelectionData, fitted) -> np.ndarray:
     """Measured minus predicted, the prediction taken at its best timing within half a row
     interval (sub_row_timing)."""
     pred = np.asarray(fitted.predict(data), float)
@@ -216,11 +217,11 @@ def _own_contribution(data: SelectionData, fitted, max_order):
     if pred is None:
         return False
     resid_twin = np.asarray(data.y, float) - np.asarray(pred, float)
-    return _compare(data, resid_twin, _resid(data, fitted), max_order)
+    return _compare(data, resid_twin, residual(data, fitted), max_order)
 
 
 def _train_mse(data: SelectionData, fitted) -> float:
-    r = _resid(data, fitted)
+    r = residual(data, fitted)
     ok = data.train_mask & np.isfinite(r)
     return float(np.mean(r[ok] ** 2)) if ok.any() else math.inf
 
@@ -324,14 +325,14 @@ def _backward_elimination(data, baseline, named, cand_by_id, current, alpha, min
     dropped = []
     without = {}
     while len(named) >= 2:
-        resid_full = _resid(data, current)
+        resid_full = residual(data, current)
         without = {}
         for cause in sorted(named, key=lambda c: c.comparison.t_stat if c.comparison is not None else 0.0):
             others = [c.id for c in named if c is not cause]
             say(f"does {cause.id} hold with {', '.join(others)} refitted without it?")
             model_wo, causes_wo = _refit_chain(data, baseline, others, cand_by_id, refine)
             without[cause.id] = model_wo
-            cmp = _compare(data, _resid(data, model_wo), resid_full, max_order)
+            cmp = _compare(data, residual(data, model_wo), resid_full, max_order)
             if not cmp.significant(alpha, min_gain_frac, plain_gain):
                 for c in causes_wo:
                     old = next(n for n in named if n.id == c.id)
@@ -380,11 +381,11 @@ def _swap_check(data, baseline, named, steps, cand_by_id, current, without, alph
         model_wo = without.get(cause.id)
         if model_wo is None:
             model_wo = _refit_chain(data, baseline, others, cand_by_id, refine)[0]
-        resid_wo, resid_full = _resid(data, model_wo), _resid(data, current)
+        resid_wo, resid_full = residual(data, model_wo), residual(data, current)
         for rival in rivals:
             order = [rival if c is cause else c.id for c in named]     # the rival in the cause's place
             model_r, causes_r = _refit_chain(data, baseline, order, cand_by_id, refine)
-            resid_r = _resid(data, model_r)
+            resid_r = residual(data, model_r)
             holds = _compare(data, resid_wo, resid_r, max_order)
             if not holds.significant(alpha, min_gain_frac, plain_gain):
                 continue
@@ -396,6 +397,7 @@ def _swap_check(data, baseline, named, steps, cand_by_id, current, without, alph
                 swaps.append(f"{rival} replaces {cause.id}: with {', '.join(others)} in the model it predicts the "
                              f"held-out residual better (t = {head.t_stat:.1f})")
                 named, current = causes_r, model_r
+                step.replaced_by = rival
                 break
             back = _compare(data, resid_r, resid_full, max_order)
             if not (back.p_value < lookalike_alpha and back.delta_ll > 0):
@@ -420,7 +422,7 @@ def _head_to_head_winner(data, best, others, lookalike_alpha, max_order):
         for other in others:
             if other.id in seen:
                 continue
-            head = _compare(data, _resid(data, best.fitted), _resid(data, other.fitted), max_order)
+            head = _compare(data, residual(data, best.fitted), residual(data, other.fitted), max_order)
             if head.p_value < lookalike_alpha and head.delta_ll > 0:
                 wins.append((head.t_stat, other))
         if not wins:
@@ -443,7 +445,7 @@ def select_causes(data: SelectionData, baseline, candidates: Sequence, alpha: fl
         structure_min_gain_frac = min_gain_frac
     say = progress or (lambda msg: None)
     current = baseline
-    resid_cur = _resid(data, current)
+    resid_cur = residual(data, current)
     say("structure test of the baseline residual")
     base_struct = _remainder_test(data, resid_cur, alpha, structure_min_gain_frac, max_order)
     remaining = list(candidates)
@@ -465,7 +467,7 @@ def select_causes(data: SelectionData, baseline, candidates: Sequence, alpha: fl
                     fits[cand.id] = better
         scores = []
         for cand in remaining:
-            cmp = _compare(data, resid_cur, _resid(data, fits[cand.id]), max_order)
+            cmp = _compare(data, resid_cur, residual(data, fits[cand.id]), max_order)
             scores.append(CandidateScore(cand.id, fits[cand.id], cmp))
         def nameable(s):
             if not s.comparison.significant(alpha, min_gain_frac, plain_gain) or _below_resolution(s.fitted):
@@ -484,12 +486,12 @@ def select_causes(data: SelectionData, baseline, candidates: Sequence, alpha: fl
             steps.append(SelectionStep(scores, None, []))
             break
         best = _head_to_head_winner(data, best, [s for s in scores[1:] if nameable(s)], lookalike_alpha, max_order)
-        resid_best = _resid(data, best.fitted)
+        resid_best = residual(data, best.fitted)
         look = []
         for other in scores:
             if other is best or not nameable(other):
                 continue
-            head = _compare(data, _resid(data, other.fitted), resid_best, max_order)
+            head = _compare(data, residual(data, other.fitted), resid_best, max_order)
             if not (head.p_value < lookalike_alpha and head.delta_ll > 0):
                 look.append(other.id)
         steps.append(SelectionStep(scores, best.id, look))
@@ -498,7 +500,7 @@ def select_causes(data: SelectionData, baseline, candidates: Sequence, alpha: fl
         if len(named) >= 2:
             say("refitting the named causes together")
             current = _backfit(data, named, {c.id: c for c in candidates}, current)
-        resid_cur = _resid(data, current)
+        resid_cur = residual(data, current)
         remaining = [c for c in remaining if c.id != best.id]
 
     dropped = []
@@ -514,7 +516,7 @@ def select_causes(data: SelectionData, baseline, candidates: Sequence, alpha: fl
             dropped += swaps
             if late_looks:
                 steps.append(SelectionStep([], None, late_looks))
-        resid_cur = _resid(data, current)
+        resid_cur = residual(data, current)
 
     say("structure test of what remains")
     rem_struct = _remainder_test(data, resid_cur, alpha, structure_min_gain_frac, max_order) if named else base_struct
@@ -576,7 +578,7 @@ def select_causes(data: SelectionData, baseline, candidates: Sequence, alpha: fl
                          why)
     best = steps[0].scores[0] if steps and steps[0].scores else None
     closest = [best.id] if best else []
-    left = leaves(_resid(data, best.fitted), None) if best else {}
+    left = leaves(residual(data, best.fitted), None) if best else {}
     if rem_struct is not None:
         left.update({"structure_t": rem_struct.comparison.t_stat, "structure_p": rem_struct.p_value,
                      "structure_gain_frac": rem_struct.gain_frac,
@@ -671,5 +673,5 @@ def parameter_ci95(candidate, fitted, data: SelectionData, base, selected=(), ma
     data when the fitted candidate gives its sensitivity, else a jackknife over runs/blocks."""
     sens = fitted.sensitivity() if hasattr(fitted, "sensitivity") else None
     if sens is not None:
-        return _sandwich_ci(sens, _resid(data, fitted), data, block_s)
+        return _sandwich_ci(sens, residual(data, fitted), data, block_s)
     return _jackknife_ci(candidate, fitted, data, base, selected)

@@ -331,5 +331,6 @@ def test_cause_named_before_the_second_one_meets_its_rivals_again(seed):
     assert sel.steps[0].chosen == "C"             # forward selection alone would name C, then B
     assert sel.verdict == "named" and sel.cause_ids == ["A", "B"], sel.reason
     assert "A replaces C" in sel.reason
+    assert sel.steps[0].replaced_by == "A"
     ci = {c.id: c.parameters_ci95["gain"] for c in sel.causes}
     assert ci["A"][0] < 1.0 < ci["A"][1] and ci["B"][0] < 1.0 < ci["B"][1]
