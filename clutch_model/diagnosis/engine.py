@@ -164,7 +164,7 @@ class Diagnosis:
     discovery: "DiscoveryOutcome | None" = None
     diagnosis_rate: dict = field(default_factory=dict)   # decimation plan (diagnosis.decimation)
     diagnosis_sample: dict = field(default_factory=dict)  # windows of a long campaign (diagnosis.sample)
-    inputs: dict = field(default_factory=dict)  # the slip smoothed or not (input_hold.InputSmoothing)
+    inputs: dict = field(default_factory=dict)  # the inputs' noise: slip smoothed, noise floor (input_hold.InputNoise)
 
     @property
     def gain_pct(self) -> float:

@@ -186,8 +186,7 @@ def model_input_noise(campaign, model, window_s: float = SENSITIVITY_WINDOW_S) -
     dt = np.abs(pred2 - pred)[slipping]
     dt = dt[np.isfinite(dt)]
     slope = float(np.sqrt(np.mean(dt ** 2)) / SLIP_STEP_RAD_S) if dt.size else float("nan")
-    tq_t, _ = _samples(run, "measured_torque", run.torque_measured_nm if run.torque_measured_nm is not None
-                       else np.zeros(run.t.size))
+    tq_t = run.samples["measured_torque"][0] if "measured_torque" in run.samples else run.t
     tq_t = tq_t[(tq_t >= base.t[0]) & (tq_t <= base.t[-1])]
     ok = np.isfinite(pred)
     at = np.interp(tq_t, base.t[ok], pred[ok]) if ok.sum() > 1 else np.zeros(0)

@@ -127,6 +127,18 @@ class NoiseModel:
         return ll
 
 
+def _stable_reflection(k: float) -> float:
+    """A reflection coefficient kept inside the unit interval (a stable filter)."""
+    return min(max(k, -0.999999), 0.999999)
+
+
+def _step_up(a: np.ndarray, e: float, k: float) -> tuple:
+    """One order up of a prediction-error filter and its error variance with reflection
+    coefficient k (shared by Burg's and Levinson-Durbin's recursions)."""
+    ext = np.r_[a, 0.0]
+    return ext + k * ext[::-1], e * (1.0 - k * k)
+
+
 def _burg(segments: list, max_order: int):
     """Multi-segment Burg recursion -> (filters per order, error variance per order)."""
     f = [s.astype(float).copy() for s in segments]
@@ -146,8 +158,7 @@ def _burg(segments: list, max_order: int):
             den += float(np.dot(ff, ff) + np.dot(bb, bb))
         if den <= 0.0:
             break
-        k = -2.0 * num / den
-        k = min(max(k, -0.999999), 0.999999)
+        k = _stable_reflection(-2.0 * num / den)
         for fi, bi in zip(f, b):
             if fi.size <= m:
                 continue
@@ -155,9 +166,7 @@ def _burg(segments: list, max_order: int):
             bb = bi[m - 1:-1].copy()
             fi[m:] = ff + k * bb
             bi[m:] = bb + k * ff
-        ext = np.r_[a, 0.0]
-        a = ext + k * ext[::-1]
-        e *= 1.0 - k * k
+        a, e = _step_up(a, e, k)
         filters.append(a)
         var.append(e)
     return filters, np.array(var)
@@ -186,11 +195,7 @@ def _levinson(g: np.ndarray, order: int):
     filters, var = [a], [e]
     for m in range(1, order + 1):
         delta = float(np.dot(a, g[m:0:-1]))
-        k = -delta / e if e > 0 else 0.0
-        k = min(max(k, -0.999999), 0.999999)
-        ext = np.r_[a, 0.0]
-        a = ext + k * ext[::-1]
-        e *= 1.0 - k * k
+        a, e = _step_up(a, e, _stable_reflection(-delta / e if e > 0 else 0.0))
         filters.append(a)
         var.append(e)
     return filters, np.array(var)
@@ -212,8 +217,10 @@ def white_floor(variance: float):
 
 
 def with_white_floor(nm: "NoiseModel", floor_variance: float) -> "NoiseModel":
-    """The AR approximation (same order) of the noise model's spectrum plus white noise of
-    ``floor_variance``: its one-step predictions can never be better than that floor."""
+    """The AR approximation of the noise model's spectrum plus white noise of
+    ``floor_variance`` (AR(p) plus white noise is ARMA(p, p): approximated by AR(max(2p,
+    p + FLOOR_EXTRA_ORDER)), at most DEFAULT_MAX_ORDER): its one-step predictions can never be
+    better than that floor."""
     if not floor_variance > 0:
         return nm
     p = min(max(2 * nm.order, nm.order + FLOOR_EXTRA_ORDER), DEFAULT_MAX_ORDER)
