@@ -18,6 +18,10 @@ the row) the player
    offline replay's timing. If the answer is missing (lost message) or echoes other inputs
    (a message overtaken in transit), the inputs and the same /clock time are sent again: the
    node recomputes a repeated time from the state before it, so a retry is exact.
+4. after a retry, waits until every /clock sent for t_k has been answered (or a deadline:
+   one was lost) before the next row's inputs go out: a /clock that was only late would
+   otherwise recompute t_k with row k+1's inputs and the plant would hold those over the
+   next step.
 
 So the live outputs equal offline replay of the same bags to numerical precision (the node
 publishes the plant torque; offline ``torque_sim`` adds the model's measurement mechanisms,
@@ -80,7 +84,7 @@ class Player:
 
     def __init__(self, node, executor, namespace: str = "/clutch", *, clock: bool = False, rate: float = 1.0,
                  reset: bool = True, ack_timeout_s: float = 1.0, max_attempts: int = 20,
-                 discovery_timeout_s: float = 20.0, recorder=None, progress: bool = True,
+                 drain_timeout_s: float = 10.0, discovery_timeout_s: float = 20.0, recorder=None, progress: bool = True,
                  node_alive=None):
         from clutch_msgs.msg import ClutchState
         from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -95,6 +99,7 @@ class Player:
         self.ns = normalize_namespace(namespace)
         self.clock_mode, self.rate, self.reset_each_bag = clock, float(rate), reset
         self.ack_timeout_s, self.max_attempts = ack_timeout_s, max_attempts
+        self.drain_timeout_s = drain_timeout_s
         self.discovery_timeout_s = discovery_timeout_s
         self.recorder, self.progress = recorder, progress
         self.node_alive = node_alive or (lambda: True)   # live_replay: its node subprocess runs
@@ -111,6 +116,7 @@ class Player:
         self._Trigger = Trigger
         self._awaiting: Optional[int] = None
         self._answer = None
+        self._answers = 0         # clutch_state messages stamped with the awaited time
         if clock:
             node.create_subscription(ClutchState, f"{self.ns}/clutch_state", self._on_state, qos)
         self._sim_now_ns = 0
@@ -126,6 +132,7 @@ class Player:
     def _on_state(self, msg) -> None:
         if self._awaiting is not None and _stamp_ns(msg.header.stamp) == self._awaiting:
             self._answer = msg
+            self._answers += 1
 
     def _spin_until(self, done, timeout_s: float) -> bool:
         deadline = time.monotonic() + timeout_s
@@ -203,8 +210,9 @@ class Player:
             sump_msg = self._temperature(s, t)
             clock_msg.clock.sec, clock_msg.clock.nanosec = divmod(t, 1_000_000_000)
             torque_before = self.recorder.counts[f"{self.ns}/clutch_torque"] if self.recorder is not None else 0
+            self._awaiting, self._answers = t, 0
             for attempt in range(self.max_attempts):
-                self._awaiting, self._answer = t, None
+                self._answer = None
                 pf.publish(force_msg)
                 pw.publish(slip_msg)
                 ps.publish(sump_msg)
@@ -223,6 +231,8 @@ class Player:
                     f"bag {run.name}: no matching clutch_state from {self.ns}/{NODE_NAME} for clock "
                     f"{t * 1e-9:.6f} s after {self.max_attempts} attempts (is the node running with "
                     "use_sim_time:=true and publish_every:=1 in this namespace?)")
+            if attempt > 0:
+                self._drain(attempt + 1)
             torque[k] = a.clutch_torque
             pack[k] = a.pack_temperature
             self._awaiting = None
@@ -231,6 +241,15 @@ class Player:
             if bar is not None:
                 bar.update(1)
         return result
+
+    def _drain(self, sent: int) -> None:
+        """After a retried step: wait until every /clock sent for it has been answered (or
+        ``drain_timeout_s``: a /clock message lost on the way). A /clock that was only late,
+        not lost, would otherwise reach the node after the next step's inputs and recompute
+        this step with them -- the plant would then advance with the wrong held inputs. /clock
+        messages of one publisher arrive in order and the node answers each one it takes, so
+        once ``sent`` answers are in, none of this step's clocks is still on its way."""
+        self._spin_until(lambda: self._answers >= sent, self.drain_timeout_s)
 
     def _flush_recorder(self, t_ns: int, torque_before: int, timeout_s: float = 30.0) -> None:
         """Wait until the recorder has taken this step's outputs (clutch_state and
@@ -299,8 +318,11 @@ class Player:
 
 def play(paths, namespace: str = "/clutch", *, clock: bool = False, rate: float = 1.0, record_out=None,
          reset: bool = True, topics=None, overwrite: bool = False, progress: bool = True,
-         context=None, domain_id: Optional[int] = None) -> PlayResult:
-    """Play bags into a running node (own rclpy context); optionally record its outputs."""
+         context=None, domain_id: Optional[int] = None, ack_timeout_s: float = 1.0,
+         max_attempts: int = 20) -> PlayResult:
+    """Play bags into a running node (own rclpy context); optionally record its outputs.
+    Lock-step: a step is sent again when the node's answer takes longer than ``ack_timeout_s``
+    (three times that from the fourth attempt), at most ``max_attempts`` times."""
     import rclpy
     from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
     from rclpy.node import Node
@@ -314,7 +336,8 @@ def play(paths, namespace: str = "/clutch", *, clock: bool = False, rate: float 
     executor.add_node(node)
     recorder = None
     try:
-        player = Player(node, executor, namespace, clock=clock, rate=rate, reset=reset, progress=progress)
+        player = Player(node, executor, namespace, clock=clock, rate=rate, reset=reset, progress=progress,
+                        ack_timeout_s=ack_timeout_s, max_attempts=max_attempts)
         if record_out is not None:
             from clutch_sim_ros.record import Recorder
 

@@ -28,22 +28,27 @@ def _lockstep(io: Io, t_ns, force, slip, sump, timeout=60.0, retry_s=1.0):
     out = []
     for k, t in enumerate(t_ns):
         want = (float(force[k]), float(slip[k]), float(sump[k]))
-        got = []
+        got, sent, answers = [], [0], [0]
 
         def answered():
             while io.states:
                 m = io.states.pop(0)
-                if (stamp_ns(m.header.stamp) == int(t)
-                        and (m.applied_force, m.slip_speed, m.sump_temperature) == want):
-                    got.append(m)
+                if stamp_ns(m.header.stamp) == int(t):
+                    answers[0] += 1
+                    if (m.applied_force, m.slip_speed, m.sump_temperature) == want:
+                        got.append(m)
             return bool(got)
 
         def tick():
             io.send(*want)
             io.clock(int(t))
+            sent[0] += 1
 
         assert io.client.spin_until(answered, timeout, step=tick, step_period=retry_s), \
             f"no clutch_state for tick {k} with its inputs {want}"
+        # a retried tick: every /clock sent for it answered before the next tick's inputs go
+        # out (a late one would recompute this tick with them); a lost one ends the wait
+        io.client.spin_until(lambda: answered() and answers[0] >= sent[0], 10.0)
         out.append(got[-1])
     return out
 
@@ -155,6 +160,28 @@ def test_play_clock_and_record_equal_offline_replay(domain_id, tmp_path):
     # nothing logged before the data starts (no 1970 log times), nothing after it ends
     all_log = [t for msgs in rec.values() for t, _ in msgs]
     assert min(all_log) >= rows[0] and max(all_log) <= rows[-1]
+
+
+def test_play_clock_retried_steps_stay_exact(domain_id, tmp_path):
+    """A player that gives up waiting after 1 ms sends most steps again while their first
+    /clock is still on its way: the late /clock must not recompute a step with the next
+    step's inputs (the outputs still equal offline replay, every step)."""
+    from clutch_model import load_model
+    from clutch_model.replay import replay_runs
+    from clutch_model.formats.bag_reader import read_bags
+    from clutch_sim_ros.play import play
+
+    bag = write_test_bag(tmp_path / "run_x", 1.0, seed=5, start_ns=T0)
+    node = NodeProcess(domain_id, ["-r", "__ns:=/rigX", "-p", "use_sim_time:=true"], tmp_path)
+    try:
+        res = play([bag], "/rigX", clock=True, progress=False, domain_id=domain_id, ack_timeout_s=0.001,
+                   max_attempts=1000)
+    finally:
+        assert node.stop() == 0, node.log()
+    off = replay_runs(load_model(None), read_bags([bag]))
+    assert res.retries > 0
+    np.testing.assert_allclose(res.bags[0].torque_nm, off.sim.torque_nm, rtol=RTOL, atol=ATOL)
+    np.testing.assert_allclose(res.bags[0].pack_temperature_c, off.sim.pack_temperature_c, rtol=RTOL, atol=ATOL)
 
 
 def test_live_replay_returns_offline_rmse(domain_id, tmp_path):
