@@ -27,7 +27,8 @@ def report_dict(d: Diagnosis) -> dict:
     sel = d.selection
     steps = []
     for k, st in enumerate(sel.steps if sel else []):
-        steps.append({"step": k + 1, "chosen": st.chosen, "replaced_by": st.replaced_by, "lookalikes": st.lookalikes,
+        steps.append({"step": k + 1, "chosen": st.chosen, "look_ahead": st.look_ahead, "replaced_by": st.replaced_by,
+                      "lookalikes": st.lookalikes,
                       "scores": [{"id": sc.id, "held_out_t": sc.comparison.t_stat,
                                   "held_out_p": sc.comparison.p_value,
                                   "innovation_variance_cut": sc.comparison.gain_frac,
