@@ -288,6 +288,11 @@ def _backfit(data: SelectionData, named: list, cand_by_id: dict, current):
                 best_mse, current = mse, refit
                 cause.fitted = refit
                 cause.parameters = dict(refit.parameters)
+            elif mse <= best_mse * (1.0 + BACKFIT_MIN_CUT):
+                # no better, no worse (within rounding): the model already holds this cause refitted with the others
+                # (a later cause's fit refitted it jointly); its parameters are the refit's
+                cause.fitted = refit
+                cause.parameters = dict(refit.parameters)
         if best_mse > start_mse * (1.0 - BACKFIT_TOL):
             break
     return current

@@ -131,6 +131,31 @@ def test_two_causes_named_strongest_first(noise):
     assert ci["offset"][0] < 6.0 < ci["offset"][1]
 
 
+@pytest.mark.parametrize("noise", NOISES)
+def test_two_causes_seen_only_together_are_named(noise, monkeypatch):
+    """Two causes each of whose candidates carries a large part that cancels in the pair: one
+    at a time neither predicts the held-out residual (the first step names nothing), together
+    they do. The look-ahead names both, with intervals holding the truth; without it the
+    answer is `unexplained` (or names one of them only)."""
+    import clutch_model.diagnosis.selection as selection
+
+    d, names, X, train, test, cols, eps, groups = _campaign(0, noise)
+    shared = 400.0 * np.sin(2 * np.pi * 1.3 * d["t"] + np.cumsum(d["run_start"]))
+    v, w = 0.05 * cols["slip_power"], 0.2 * cols["temperature"]
+    y = v + w + eps
+    cands = [LinearCandidate("A", shared + v), LinearCandidate("B", w - shared), LinearCandidate("offset", cols["offset"])]
+    data = _data(y, d, names, X, train, test, groups)
+    sel = select_causes(data, Zero(), cands)
+    assert sel.verdict == "named" and sorted(sel.cause_ids) == ["A", "B"], sel.reason
+    assert sel.steps[0].look_ahead and sel.steps[0].scores[0].comparison.t_stat < 4.0   # not seen alone
+    for cause in sel.causes:
+        lo, hi = cause.parameters_ci95["gain"]
+        assert lo < 1.0 < hi, (cause.id, lo, hi)
+    monkeypatch.setattr(selection, "LOOK_AHEAD_TOP", 0)
+    blind = select_causes(data, Zero(), cands, intervals=False)
+    assert sorted(blind.cause_ids) != ["A", "B"]
+
+
 def test_lookalike_that_data_cannot_separate_is_unexplained():
     """Two candidates that differ by less than the data resolves: the answer is `unexplained`
     with the closest candidates, not a guess."""
