@@ -217,7 +217,9 @@ def _own_contribution(data: SelectionData, fitted, max_order):
     pred = twin() if twin is not None else None
     if pred is None:
         return False
-    resid_twin = np.asarray(data.y, float) - np.asarray(pred, float)
+    pred = np.asarray(pred, float)
+    resid_twin = np.asarray(data.y, float) - pred
+    resid_twin = resid_twin - sub_row_timing(data, pred, resid_twin)   # at its best timing, as every model
     return _compare(data, resid_twin, residual(data, fitted), max_order)
 
 
