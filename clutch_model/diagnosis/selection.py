@@ -206,9 +206,10 @@ def _below_resolution(fitted) -> str | None:
 
 
 def _own_contribution(data: SelectionData, fitted, max_order):
-    """Held-out comparison of a fitted candidate with its mechanism-free twin (the same fit with
-    the mechanism taken out, ``fitted.without_mechanism()``), or False when the candidate has no
-    twin. The candidate must beat it: a gain that the twin has as well came from what was
+    """Held-out comparison of a fitted candidate with its mechanism-free twin
+    (``fitted.without_mechanism()``: the same fit without the mechanism; for a catalog
+    mechanism refitted jointly with the friction, the friction refitted alone), or False when
+    the candidate has no twin. The candidate must beat it: a gain that the twin has as well came from what was
     refitted alongside (the friction correction), not from the mechanism. Measured on
     `car / none / 44`: a hysteresis of ratio 0.0012, refitted with the friction from the bench
     fit, cut the held-out RMSE 10.52 -> 10.25 N*m at t = 4.1, while the model with that
