@@ -452,6 +452,12 @@ class _Stepper:
         self.alpha, self.min_gain_frac, self.plain_gain = alpha, min_gain_frac, plain_gain
         self.lookalike_alpha, self.max_order, self.refine_top, self.say = lookalike_alpha, max_order, refine_top, say
 
+    def explains(self, s: CandidateScore) -> bool:
+        """It predicts the held-out residual better than the model so far (significant and
+        material) with its time parameters resolved by the rows."""
+        return (s.comparison.significant(self.alpha, self.min_gain_frac, self.plain_gain)
+                and not _below_resolution(s.fitted))
+
     def nameable(self, s: CandidateScore) -> bool:
         data = self.data
         if not s.comparison.significant(self.alpha, self.min_gain_frac, self.plain_gain) or _below_resolution(s.fitted):
@@ -493,7 +499,12 @@ class _Stepper:
         resid_best = residual(data, best.fitted)
         look = []
         for other in scores:
-            if other is best or not self.nameable(other):
+            # a lookalike: any runner-up that predicts the held-out residual as significantly
+            # (resolved by the rows), named or not on its own: one that fails only its twin
+            # check still explains the residual as well unless the best beats it head to head
+            # (transport_delay+drag_torque@lab#1: actuator_lag and torque_sensor_lag both at
+            # t = 3.5, the sensor lag short of its twin check; actuator_lag alone was a wrong name)
+            if other is best or not self.explains(other):
                 continue
             head = _compare(data, residual(data, other.fitted), resid_best, self.max_order)
             if not (head.p_value < self.lookalike_alpha and head.delta_ll > 0):
