@@ -359,3 +359,17 @@ def test_cause_named_before_the_second_one_meets_its_rivals_again(seed):
     assert sel.steps[0].replaced_by == "A"
     ci = {c.id: c.parameters_ci95["gain"] for c in sel.causes}
     assert ci["A"][0] < 1.0 < ci["A"][1] and ci["B"][0] < 1.0 < ci["B"][1]
+
+
+def test_interval_that_does_not_pin_the_parameter_down():
+    """A named cause's 95 % interval holding 0 or spanning more than a factor of 100 is no
+    name (the two wrong names of the stop-20 matrix had [3e-10, 977] and [0.013, 8.2])."""
+    from clutch_model.diagnosis.selection import _unidentified
+
+    assert _unidentified({"ratio": [3.4e-10, 977.0]})
+    assert _unidentified({"offset_nm": [0.0125, 8.22]})
+    assert _unidentified({"coeff": [-0.5, 2.0]})
+    assert _unidentified({"tau_s": [0.01, float("inf")]})
+    assert not _unidentified({"ratio": [0.1786, 0.2034]})
+    assert not _unidentified({"offset_nm": [-36.0, -33.3]})
+    assert not _unidentified({"energy_scale_j": [3.9e5, 5.6e5], "tau_s": [0.062, 0.073]})
