@@ -32,7 +32,11 @@ def report_dict(d: Diagnosis) -> dict:
                       "scores": [{"id": sc.id, "held_out_t": sc.comparison.t_stat,
                                   "held_out_p": sc.comparison.p_value,
                                   "innovation_variance_cut": sc.comparison.gain_frac,
-                                  "parameters": sc.fitted.parameters} for sc in st.scores]})
+                                  "parameters": sc.fitted.parameters,
+                                  **({"against_twin": {"held_out_t": sc.own.t_stat,
+                                                       "plain_gain_frac": sc.own.plain_gain_frac,
+                                                       "held_out_pieces_rmse_nm": sc.own_pieces}}
+                                     if sc.own not in (None, False) else {})} for sc in st.scores]})
 
     def structure(st):
         if st is None:
