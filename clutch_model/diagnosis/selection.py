@@ -589,13 +589,14 @@ def _look_ahead(data, baseline, resid_base, structured: bool, step1: SelectionSt
     return None
 
 
-def _other_first(data, current, named, step1: SelectionStep, candidates, step, cand_by_id, alpha, min_gain_frac,
-                 plain_gain, max_order, say):
+def _other_first(data, current, named, step1: SelectionStep, step2: SelectionStep, candidates, step, cand_by_id,
+                 alpha, min_gain_frac, plain_gain, max_order, say):
     """One cause named, nothing nameable on top of it: a cause named first was fitted while
     the second was missing, and a neighbour of the true first cause may have taken its place
     and part of the second. Each of the LOOK_AHEAD_TOP other first-step candidates that fit
-    the training rows best (resolved, with a held-out gain of their own) is taken
-    provisionally and a second step is run on top of it; a pair whose second cause is
+    the training rows best (resolved, with a held-out gain of their own), and the second
+    step's leader that fell short on top of the named cause, is taken provisionally (fitted
+    alone) and a second step is run on top of it; a pair whose second cause is
     nameable and whose two causes together (backfitted) predict the held-out residual better
     than the one named cause at alpha / LOOK_AHEAD_TOP is a candidate answer, the best of them
     (by held-out log-likelihood) kept. Backward elimination and the swap check then ask of
@@ -611,9 +612,15 @@ def _other_first(data, current, named, step1: SelectionStep, candidates, step, c
     named_id = named[0].id
     tried = sorted((s for s in step1.scores if s.id != named_id and s.id in cand_by_id
                     and not _below_resolution(s.fitted) and s.comparison.delta_ll > 0),
-                   key=lambda s: _train_mse(data, s.fitted))
+                   key=lambda s: _train_mse(data, s.fitted))[:LOOK_AHEAD_TOP]
+    # and the second step's leader, short of naming on top of the named cause, taken first
+    lead = next((sc for sc in step2.scores if sc.comparison.delta_ll > 0), None) if step2.scores else None
+    if lead is not None and lead.id not in {s.id for s in tried}:
+        alone = next((s for s in step1.scores if s.id == lead.id and not _below_resolution(s.fitted)), None)
+        if alone is not None:
+            tried.append(alone)
     best = None
-    for first in tried[:LOOK_AHEAD_TOP]:
+    for first in tried:
         say(f"looking ahead: {first.id} first, a second cause on top of it?")
         cause1 = Cause(first.id, first.fitted, dict(first.fitted.parameters), {}, first.comparison)
         st2, second = step(first.fitted, [cause1], [c for c in candidates if c.id != first.id])
@@ -702,7 +709,7 @@ def select_causes(data: SelectionData, baseline, candidates: Sequence, alpha: fl
                 remaining = [c for c in remaining if c.id not in {n.id for n in named}]
                 continue
         if best is None and len(named) == 1 and len(steps) == 2 and not steps[0].look_ahead:
-            other = _other_first(data, current, named, steps[0], candidates, step, cand_by_id, alpha,
+            other = _other_first(data, current, named, steps[0], steps[1], candidates, step, cand_by_id, alpha,
                                  min_gain_frac, plain_gain, max_order, say)
             if other is not None:
                 named, current, steps = other[0], other[1], other[2]
