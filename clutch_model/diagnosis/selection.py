@@ -598,7 +598,7 @@ def _other_first(data, current, named, step1: SelectionStep, step2: SelectionSte
     step's leader that fell short on top of the named cause, is taken provisionally (fitted
     alone) and a second step is run on top of it; a pair whose second cause is
     nameable and whose two causes together (backfitted) predict the held-out residual better
-    than the one named cause at alpha / LOOK_AHEAD_TOP is a candidate answer, the best of them
+    than the one named cause at alpha / (the number tried) is a candidate answer, the best of them
     (by held-out log-likelihood) kept. Backward elimination and the swap check then ask of
     each of the two whether it holds and whether a runner-up (the cause named first among
     them) does better in its place.
@@ -631,7 +631,7 @@ def _other_first(data, current, named, step1: SelectionStep, step2: SelectionSte
         model = _backfit(data, pair_causes, cand_by_id, second.fitted)
         pair = _compare(data, resid_cur, residual(data, model), max_order)
         say(f"  {first.id} + {second.id} against {named_id} alone: held-out t = {pair.t_stat:.1f}")
-        if not pair.significant(alpha / LOOK_AHEAD_TOP, min_gain_frac, plain_gain):
+        if not pair.significant(alpha / len(tried), min_gain_frac, plain_gain):
             continue
         cause1.comparison = pair      # its evidence: the pair against the one cause named alone
         if best is None or pair.delta_ll > best[0].delta_ll:
