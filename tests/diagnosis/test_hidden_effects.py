@@ -68,6 +68,22 @@ def test_says_none_without_mechanism(tmp_path):
     assert r["calibrated"] < r["nominal"]
 
 
+def test_tiny_campaign_without_mechanism_is_none(tmp_path):
+    """Three 4 s runs, nothing hidden (one 4 s run held out): a negative drag, -0.069 N*m*s/rad
+    [-0.098, -0.041] at held-out t = 3.8, was named until drag was fitted as what it is,
+    dissipative (coefficient >= 0); a negative one is a friction-law misfit."""
+    spec = CampaignSpec(seed=1, n_runs=3, run_duration_s=4.0, rate_hz=200.0)
+    write_campaign(synthesize_campaign(spec), tmp_path / "campaign")
+    bags = sorted(str(p) for p in (tmp_path / "campaign" / "bags").iterdir())
+    assert cli(["diagnose", "--bench", str(tmp_path / "campaign" / "bench.csv"), "--bags", *bags,
+                "--out", str(tmp_path / "diag")]) == 0
+    rep = json.loads((tmp_path / "diag" / "report.json").read_text())
+    assert rep["cause"]["id"] == "none", rep["cause"]["evidence"]
+    drag = [sc["parameters"]["coeff_nm_per_rad_s"] for st in rep["selection"]["steps"] for sc in st["scores"]
+            if sc["id"] == "drag_torque"]
+    assert drag and min(drag) >= 0.0
+
+
 @pytest.mark.parametrize("k,effect", [(30 + j, e) for j, e in enumerate(EXTRA)])
 def test_effect_outside_catalog(tmp_path, k, effect):
     """An effect outside the catalog is never read as `none` or as a catalog mechanism. One the
