@@ -31,7 +31,7 @@ from typing import Callable, Protocol, Sequence
 
 import numpy as np
 
-from clutch_model.diagnosis.noise_model import DEFAULT_MAX_ORDER
+from clutch_model.diagnosis.noise_model import DEFAULT_MAX_ORDER, segments_of
 from clutch_model.diagnosis.structure_test import (ALPHA, BLOCK_S, MIN_GAIN_FRAC, PredictiveComparison,
                                                    StructureResult, block_labels, compare_residuals,
                                                    held_out_excess_test, per_run_structure_test,
@@ -228,22 +228,14 @@ def _own_contribution(data: SelectionData, fitted, max_order):
     return _compare(data, resid_twin, resid, max_order), piece_rmse(data, resid, resid_twin)
 
 
-def held_out_pieces(data: SelectionData) -> list:
-    """The held-out rows in pieces: each held-out run, or each held-out time span of a run
-    (contiguous held-out rows) -> [row index arrays]."""
-    test = np.asarray(data.test_mask, bool)
-    starts = np.asarray(data.run_start, bool).copy()
-    if starts.size:
-        starts[0] = True
-    edge = test & (np.r_[True, ~test[:-1]] | starts)
-    label = np.cumsum(edge)
-    return [np.flatnonzero(test & (label == k)) for k in range(1, int(label[-1]) + 1)] if test.any() else []
-
-
 def piece_rmse(data: SelectionData, resid_a, resid_b, min_rows: int = 20) -> list:
-    """Plain RMSE of two residuals on each held-out piece (held_out_pieces) -> [[a, b], ...]."""
+    """Plain RMSE of two residuals on each held-out piece -- each held-out run, or each
+    held-out time span of a run (noise_model.segments_of over the held-out rows) ->
+    [[a, b], ...]."""
     out = []
-    for rows in held_out_pieces(data):
+    pieces = segments_of(np.zeros(np.size(data.test_mask)), data.run_start, mask=data.test_mask)
+    for a, b in pieces:
+        rows = np.arange(a, b)
         ok = rows[np.isfinite(resid_a[rows]) & np.isfinite(resid_b[rows])]
         if ok.size >= min_rows:
             out.append([float(np.sqrt(np.mean(resid_a[ok] ** 2))), float(np.sqrt(np.mean(resid_b[ok] ** 2)))])
@@ -550,6 +542,19 @@ LOOK_AHEAD_TOP = 2              # first-step candidates tried as the first of tw
 LOOK_AHEAD_MIN_TRAIN_CUT = 0.05  # ... when they cut the training mean square by at least this
 
 
+def _pair_on_top(data, first: CandidateScore, pool, step, cand_by_id, resid_null, max_order):
+    """``first`` taken provisionally as a cause and a step run on top of it over ``pool``:
+    -> (the two causes backfitted, their model, the pair against ``resid_null`` on held-out
+    data, the second step), or None when nothing is nameable on top of it."""
+    cause1 = Cause(first.id, first.fitted, dict(first.fitted.parameters), {}, first.comparison)
+    st2, second = step(first.fitted, [cause1], [c for c in pool if c.id != first.id])
+    if second is None:
+        return None
+    causes = [cause1, Cause(second.id, second.fitted, dict(second.fitted.parameters), {}, second.comparison)]
+    model = _backfit(data, causes, cand_by_id, second.fitted)
+    return causes, model, _compare(data, resid_null, residual(data, model), max_order), st2
+
+
 def _look_ahead(data, baseline, resid_base, structured: bool, step1: SelectionStep, remaining, step, cand_by_id,
                 alpha, min_gain_frac, plain_gain, max_order, say):
     """Two causes that the first step cannot see one at a time. When no candidate is nameable
@@ -574,16 +579,13 @@ def _look_ahead(data, baseline, resid_base, structured: bool, step1: SelectionSt
         tried = [s for s in tried if _train_mse(data, s.fitted) < base_mse * (1.0 - LOOK_AHEAD_MIN_TRAIN_CUT)]
     for first in tried[:LOOK_AHEAD_TOP]:
         say(f"looking ahead: a second cause on top of {first.id}?")
-        cause1 = Cause(first.id, first.fitted, dict(first.fitted.parameters), {}, first.comparison)
-        st2, second = step(first.fitted, [cause1], [c for c in remaining if c.id != first.id])
-        if second is None:
+        found = _pair_on_top(data, first, remaining, step, cand_by_id, resid_base, max_order)
+        if found is None:
             continue
-        named = [cause1, Cause(second.id, second.fitted, dict(second.fitted.parameters), {}, second.comparison)]
-        current = _backfit(data, named, cand_by_id, second.fitted)
-        pair = _compare(data, resid_base, residual(data, current), max_order)
+        named, current, pair, st2 = found
         if not pair.significant(alpha / LOOK_AHEAD_TOP, min_gain_frac, plain_gain):
             continue
-        cause1.comparison = pair
+        named[0].comparison = pair
         st1 = SelectionStep(step1.scores, first.id, [], look_ahead=True)
         return named, current, [st1, st2]
     return None
@@ -602,8 +604,8 @@ def _nearly_second(step2: SelectionStep) -> bool:
     return bool(ps) and min(ps) < OTHER_FIRST_P
 
 
-def _other_first(data, current, named, step1: SelectionStep, step2: SelectionStep, candidates, step, cand_by_id,
-                 alpha, min_gain_frac, plain_gain, max_order, say):
+def _other_first(data, resid_cur, named, step1: SelectionStep, step2: SelectionStep, candidates, step,
+                 cand_by_id, alpha, min_gain_frac, plain_gain, max_order, say):
     """One cause named, nothing nameable on top of it: a cause named first was fitted while
     the second was missing, and a neighbour of the true first cause may have taken its place
     and part of the second. Each of the LOOK_AHEAD_TOP other first-step candidates that fit
@@ -620,8 +622,7 @@ def _other_first(data, current, named, step1: SelectionStep, step2: SelectionSte
     (a 27 ms delay, drag 4.1 N*m*s/rad): without drag in the model the delay fitted 14 ms and
     a torque-sensor lag of 18 ms led the first step (t = 3.4 and 4.6); on top of it drag
     reached t = 3.2 (p = 0.002 > 0.001) and the lag was named alone, a wrong name.
-    -> (causes, model, steps) or None."""
-    resid_cur = residual(data, current)
+    ``resid_cur``: the residual of the one named cause. -> (causes, model, steps) or None."""
     named_id = named[0].id
     tried = sorted((s for s in step1.scores if s.id != named_id and s.id in cand_by_id
                     and not _below_resolution(s.fitted) and s.comparison.delta_ll > 0),
@@ -635,18 +636,14 @@ def _other_first(data, current, named, step1: SelectionStep, step2: SelectionSte
     best = None
     for first in tried:
         say(f"looking ahead: {first.id} first, a second cause on top of it?")
-        cause1 = Cause(first.id, first.fitted, dict(first.fitted.parameters), {}, first.comparison)
-        st2, second = step(first.fitted, [cause1], [c for c in candidates if c.id != first.id])
-        if second is None:
+        found = _pair_on_top(data, first, candidates, step, cand_by_id, resid_cur, max_order)
+        if found is None:
             continue
-        pair_causes = [cause1, Cause(second.id, second.fitted, dict(second.fitted.parameters), {},
-                                     second.comparison)]
-        model = _backfit(data, pair_causes, cand_by_id, second.fitted)
-        pair = _compare(data, resid_cur, residual(data, model), max_order)
-        say(f"  {first.id} + {second.id} against {named_id} alone: held-out t = {pair.t_stat:.1f}")
+        pair_causes, model, pair, st2 = found
+        say(f"  {first.id} + {pair_causes[1].id} against {named_id} alone: held-out t = {pair.t_stat:.1f}")
         if not pair.significant(alpha / len(tried), min_gain_frac, plain_gain):
             continue
-        cause1.comparison = pair      # its evidence: the pair against the one cause named alone
+        pair_causes[0].comparison = pair      # its evidence: the pair against the one cause named alone
         if best is None or pair.delta_ll > best[0].delta_ll:
             best = (pair, pair_causes, model, first, st2)
     if best is None:
@@ -723,7 +720,7 @@ def select_causes(data: SelectionData, baseline, candidates: Sequence, alpha: fl
                 continue
         if (best is None and len(named) == 1 and len(steps) == 2 and not steps[0].look_ahead
                 and _nearly_second(steps[1])):
-            other = _other_first(data, current, named, steps[0], steps[1], candidates, step, cand_by_id, alpha,
+            other = _other_first(data, resid_cur, named, steps[0], steps[1], candidates, step, cand_by_id, alpha,
                                  min_gain_frac, plain_gain, max_order, say)
             if other is not None:
                 named, current, steps = other[0], other[1], other[2]
