@@ -397,3 +397,33 @@ def test_interval_that_does_not_pin_the_parameter_down():
     assert not _unidentified({"ratio": [0.1786, 0.2034]})
     assert not _unidentified({"offset_nm": [-36.0, -33.3]})
     assert not _unidentified({"energy_scale_j": [3.9e5, 5.6e5], "tau_s": [0.062, 0.073]})
+
+
+def test_head_to_head_rival_with_larger_plain_error_does_not_take_the_name(monkeypatch):
+    """The whitened head-to-head comparison and the plain held-out error can disagree (each
+    comparison whitens with the alternative's own noise model): a rival that wins head to head
+    but leaves a larger plain held-out error does not replace the best (actuator_lag@held#2: the
+    sensor lag won at t = 6.0 with 8.99 N·m against 8.03); one that wins on both does."""
+    from clutch_model.diagnosis import selection as S
+    from clutch_model.diagnosis.structure_test import PredictiveComparison
+
+    d, names, X, train, test, cols, eps, groups = _campaign(7, "white")
+    data = _data(eps, d, names, X, train, test, groups)
+    base = Zero()
+    best = S.CandidateScore("best", LinearCandidate("best", cols["offset"]).fit(TrainingSet(data, base, ())), None)
+    rival = S.CandidateScore("rival", LinearCandidate("rival", cols["slip"]).fit(TrainingSet(data, base, ())), None)
+    rmse = {}
+
+    def fake_compare(data_, resid_null, resid_alt, max_order):
+        # the rival beats the best head to head on the whitened errors, never the other way
+        rival_alt = np.array_equal(resid_alt, S.residual(data_, rival.fitted))
+        rn, ra = (rmse["best"], rmse["rival"]) if rival_alt else (rmse["rival"], rmse["best"])
+        return PredictiveComparison(delta_ll=5.0 if rival_alt else -5.0, t_stat=6.0 if rival_alt else -6.0,
+                                    p_value=1e-6 if rival_alt else 1.0, n_blocks=20, n_rows=1000,
+                                    gain_frac=0.1, rmse_null=rn, rmse_alt=ra)
+
+    monkeypatch.setattr(S, "_compare", fake_compare)
+    rmse.update(best=8.03, rival=8.99)
+    assert S._head_to_head_winner(data, best, [rival], 0.01, 8).id == "best"
+    rmse.update(best=8.99, rival=8.03)
+    assert S._head_to_head_winner(data, best, [rival], 0.01, 8).id == "rival"
