@@ -435,7 +435,8 @@ def _swap_check(data, baseline, named, steps, cand_by_id, current, without, alph
 def _head_to_head_winner(data, best, others, lookalike_alpha, max_order):
     """The candidate to name among the nameable ones: ``best`` (the largest gain against the
     residual so far) unless another one predicts the held-out residual significantly better
-    than it head to head, in which case that one (the strongest such win), and so on.
+    than it head to head without a larger plain held-out error, in which case that one (the
+    strongest such win), and so on.
 
     Each candidate's gain is measured against the residual so far with a noise model fitted
     to that comparison, so two close lookalikes may rank one way there and the other way head
