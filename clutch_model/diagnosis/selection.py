@@ -374,6 +374,23 @@ def _backward_elimination(data, baseline, named, cand_by_id, current, alpha, min
     return current, named, dropped, without
 
 
+def _takes_the_name(head, lookalike_alpha) -> bool:
+    """A rival's head-to-head comparison (null: the named model or candidate, alternative: the
+    rival) lets the rival take the name: it predicts the held-out residual significantly better
+    (p < lookalike_alpha, whitened one-step errors) and its plain held-out RMSE is not larger.
+
+    The whitened errors weigh what the noise model cannot forecast, and each comparison whitens
+    with the alternative's own noise model, so two close lookalikes may each look better in the
+    other's terms; a rival that wins there while its plain held-out error is larger has
+    conflicting evidence and stays a lookalike (unless the named one beats it). Measured at
+    campaign seed 2: under torque noise drawn at 10 Hz and held, torque_sensor_lag beat
+    actuator_lag head to head (actuator_lag@held#2, 77 ms lag, t = 6.0) with a plain held-out
+    RMSE of 8.99 N·m against 8.03, and beat a 50 ms delay (transport_delay@held#2) with 8.74
+    against 8.18; on transport_delay+drag_torque@long_drive#2 the swap check put a sensor lag
+    in an actuator lag's place (t = 6.7) where the delay was the cause. All wrong names."""
+    return head.p_value < lookalike_alpha and head.delta_ll > 0 and not head.rmse_alt > head.rmse_null
+
+
 SWAP_RIVALS = 2     # runners-up per named cause tried again with the other causes in the model
 
 
@@ -384,8 +401,8 @@ def _swap_check(data, baseline, named, steps, cand_by_id, current, without, alph
     lookalike check ran without the causes after it. For each named cause and each of the
     SWAP_RIVALS best other candidates of the step that named it, the model of the other causes
     plus the rival (refitted in order, backfitted) meets the model with every cause head to
-    head on held-out data. A rival that predicts significantly better (p < lookalike_alpha)
-    replaces the cause; a rival that the named model does not beat, and that holds on top of
+    head on held-out data. A rival that takes the name (``_takes_the_name``: significantly better,
+    p < lookalike_alpha, without a larger plain held-out error) replaces the cause; a rival that the named model does not beat, and that holds on top of
     the other causes, is a lookalike (-> ``unexplained``). Measured on
     transport_delay+drag_torque@unaligned#1 (`--quick`, a 27 ms delay, torque at 50 Hz): the
     delay fitted without drag came out at 17 ms (t = 2.6), an actuator lag was named first
@@ -417,12 +434,13 @@ def _swap_check(data, baseline, named, steps, cand_by_id, current, without, alph
             if not holds.significant(alpha, min_gain_frac, plain_gain):
                 continue
             head = _compare(data, resid_full, resid_r, max_order)
-            if head.p_value < lookalike_alpha and head.delta_ll > 0:
+            if _takes_the_name(head, lookalike_alpha):
                 for c in causes_r:
                     old = next((n for n in named if n.id == c.id), None)
                     c.comparison = old.comparison if old is not None else holds
                 swaps.append(f"{rival} replaces {cause.id}: with {', '.join(others)} in the model it predicts the "
-                             f"held-out residual better (t = {head.t_stat:.1f})")
+                             f"held-out residual better (t = {head.t_stat:.1f}, plain RMSE {head.rmse_alt:.2f} "
+                                 f"against {head.rmse_null:.2f} N·m)")
                 named, current = causes_r, model_r
                 step.replaced_by = rival
                 break
@@ -453,19 +471,8 @@ def _head_to_head_winner(data, best, others, lookalike_alpha, max_order):
                 continue
             resid_other = residual(data, other.fitted)
             head = _compare(data, resid_best, resid_other, max_order)
-            if not (head.p_value < lookalike_alpha and head.delta_ll > 0):
-                continue
-            # the whitened one-step errors weigh what the noise model cannot forecast; a rival
-            # that wins there while its plain held-out error is larger has conflicting evidence
-            # and does not take the name (it stays a lookalike unless the best beats it).
-            # Measured at campaign seed 2 under torque noise drawn at 10 Hz and held:
-            # actuator_lag@held#2 (77 ms lag): torque_sensor_lag beat actuator_lag head to head
-            # (t = 6.0) with a plain held-out RMSE of 8.99 N·m against 8.03; transport_delay@held#2
-            # (50 ms delay): the sensor lag beat the delay, 8.74 N·m against 8.18. Both were
-            # wrong names
-            if head.rmse_alt > head.rmse_null:
-                continue
-            wins.append((head.t_stat, other))
+            if _takes_the_name(head, lookalike_alpha):
+                wins.append((head.t_stat, other))
         if not wins:
             return best
         best = max(wins, key=lambda w: w[0])[1]

@@ -427,3 +427,34 @@ def test_head_to_head_rival_with_larger_plain_error_does_not_take_the_name(monke
     assert S._head_to_head_winner(data, best, [rival], 0.01, 8).id == "best"
     rmse.update(best=8.99, rival=8.03)
     assert S._head_to_head_winner(data, best, [rival], 0.01, 8).id == "rival"
+
+
+def test_swap_rival_with_larger_plain_error_does_not_replace_the_cause(monkeypatch):
+    """The swap check's rival must win on both counts too (transport_delay+drag_torque@
+    long_drive#2: a sensor lag took an actuator lag's place at t = 6.7 where a delay was the
+    cause). In the C = A + 0.4 B + 0.7 D campaign that names A and B, the swap's head-to-head
+    comparisons are given a larger plain error for the rival: A no longer replaces C and,
+    since C with B does not beat it either, A is a lookalike (-> unexplained)."""
+    import sys
+
+    from clutch_model.diagnosis import selection as S
+
+    real = S._compare
+
+    def compare(data_, resid_null, resid_alt, max_order):
+        head = real(data_, resid_null, resid_alt, max_order)
+        if sys._getframe(1).f_code.co_name == "_swap_check" and head.delta_ll > 0:
+            head.rmse_null, head.rmse_alt = min(head.rmse_null, head.rmse_alt), max(head.rmse_null, head.rmse_alt)
+        return head
+
+    d, names, X, train, test, cols, eps, groups = _campaign(2, "ar1_095")
+    a, b, dd = 0.03 * cols["slip_power"], 6.0 * cols["offset"], 0.03 * cols["temperature"]
+    y = a + b + eps
+    cands = [LinearCandidate("A", a), LinearCandidate("B", b), LinearCandidate("C", a + 0.4 * b + 0.7 * dd),
+             LinearCandidate("slip", cols["slip"])]
+    data = _data(y, d, names, X, train, test, groups)
+    monkeypatch.setattr(S, "_compare", compare)
+    sel = select_causes(data, Zero(), cands, intervals=False)
+    assert "A replaces C" not in sel.reason
+    assert sel.verdict == "unexplained", sel.reason
+    assert "A" in sel.closest, sel.closest
