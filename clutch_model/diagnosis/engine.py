@@ -737,7 +737,7 @@ def _degradation_or_fade(data: SelectionData, base, campaign: Campaign, bench_mo
            f"and {deg_better.t_stat:.1f} head to head)")
     left = {"held_out_rmse": _rmse(r_deg, data.test_mask)}
     unexplained = Selection("unexplained", [], sel.steps, base, sel.baseline_structure, sel.remainder_structure,
-                            ["friction_degradation", "discovered"], left, why)
+                            ["friction_degradation", "discovered"], left, why, sel.run_level)
     return unexplained, DiscoveryOutcome(dsel, False)
 
 

@@ -65,6 +65,7 @@ def report_dict(d: Diagnosis) -> dict:
                       "baseline_structure": structure(sel.baseline_structure) if sel else None,
                       "remainder_structure": structure(sel.remainder_structure) if sel else None,
                       "closest": sel.closest if sel else [], "closest_leaves": sel.closest_leaves if sel else {},
+                      "run_level": sel.run_level.as_dict() if sel and sel.run_level is not None else None,
                       "discovery": ({"accepted": d.discovery.accepted, "reason": d.discovery.selection.reason,
                                      "tried": d.discovery.tried()} if d.discovery is not None else None)},
         "residual_features_r2": d.features_r2,

@@ -36,6 +36,7 @@ from clutch_model.diagnosis.structure_test import (ALPHA, BLOCK_S, MIN_GAIN_FRAC
                                                    StructureResult, block_labels, compare_residuals,
                                                    held_out_excess_test, per_run_structure_test,
                                                    structure_test)
+from clutch_model.diagnosis.run_level import RunLevelResult, run_level_test
 
 LOOKALIKE_ALPHA = 0.01   # a runner-up is a lookalike unless the best beats it at this level (one-sided)
 LOOKALIKE_P_RATIO = 10.0  # ... counted when its held-out p is below alpha or this factor times the best's
@@ -142,6 +143,7 @@ class Selection:
     closest: list                   # unexplained: the closest candidate chain (ids)
     closest_leaves: dict            # unexplained: what it leaves (held-out RMSE, structure)
     reason: str
+    run_level: RunLevelResult | None = None   # the baseline's friction level per run (run_level.py)
 
     @property
     def cause_ids(self) -> list:
@@ -722,6 +724,8 @@ def select_causes(data: SelectionData, baseline, candidates: Sequence, alpha: fl
     resid_cur = residual(data, current)
     say("structure test of the baseline residual")
     base_struct = _remainder_test(data, resid_cur, alpha, structure_min_gain_frac, max_order)
+    run_level = run_level_test(resid_cur, data.y - resid_cur, data.train_mask | data.test_mask, data.run_start,
+                               data.t)
     remaining = list(candidates)
     named: list = []
     steps: list = []
@@ -811,7 +815,7 @@ def select_causes(data: SelectionData, baseline, candidates: Sequence, alpha: fl
         left = leaves_of(data, residual(data, best.fitted), rem_struct) if best else {}
         return Selection("unexplained", [], steps, baseline, base_struct, rem_struct, unidentified, left,
                          "; ".join(dropped) + ": something predicts the held-out residual, but no candidate "
-                         "whose parameters the data pin down")
+                         "whose parameters the data pin down", run_level=run_level)
 
     def leaves(resid, struct):
         return leaves_of(data, resid, struct)
@@ -822,8 +826,20 @@ def select_causes(data: SelectionData, baseline, candidates: Sequence, alpha: fl
         if dropped:
             why += "; " + "; ".join(dropped)
         return Selection("named", named, steps, current, base_struct, rem_struct, [], {},
-                         f"named in order: {why}; what remains is indistinguishable from noise on held-out data")
+                         f"named in order: {why}; what remains is indistinguishable from noise on held-out data",
+                         run_level=run_level)
     if not named and not structured_left:
+        if run_level.found:
+            # no input predicts it and no candidate explains it, but it is not noise: within a
+            # run, one stretch's friction level predicts the others'
+            lv = run_level.as_dict()
+            why = (f"the friction level differs from run to run (between-run sd "
+                   f"{100 * run_level.between_sd:.1f} %, F = {run_level.f_stat:.1f} on {run_level.dof[0]} and "
+                   f"{run_level.dof[1]} dof, p = {run_level.p_value:.2g}; levels "
+                   + ", ".join(f"{100 * v:+.1f} %" for v in run_level.levels)
+                   + "): no input predicts it from one run to the next and no candidate explains it")
+            return Selection("unexplained", [], steps, baseline, base_struct, rem_struct, [], {"run_level": lv}, why,
+                             run_level)
         best = steps[0].scores[0] if steps and steps[0].scores else None
         why = ("no candidate predicts the held-out residual better than the noise model"
                + (f" (best {best.id}: t = {best.comparison.t_stat:.1f})" if best else "")
@@ -838,7 +854,7 @@ def select_causes(data: SelectionData, baseline, candidates: Sequence, alpha: fl
                                 f"{-100 * own.plain_gain_frac:+.2f} %)" if own not in (None, False) else ""))
             why = (f"{best.id} predicts the held-out residual (t = {best.comparison.t_stat:.1f}) but is not "
                    f"named: {not_named}; the inputs predict nothing in the residual")
-        return Selection("none", [], steps, baseline, base_struct, rem_struct, [], {}, why)
+        return Selection("none", [], steps, baseline, base_struct, rem_struct, [], {}, why, run_level=run_level)
     # unexplained
     if named:
         closest = [c.id for c in named]
@@ -850,7 +866,7 @@ def select_causes(data: SelectionData, baseline, candidates: Sequence, alpha: fl
             why = (f"after {', '.join(closest)} structure remains that the inputs predict "
                    f"(held-out t = {rem_struct.comparison.t_stat:.1f}) and no candidate explains")
         return Selection("unexplained", [], steps, baseline, base_struct, rem_struct, closest + unresolved, left,
-                         why)
+                         why, run_level=run_level)
     best = steps[0].scores[0] if steps and steps[0].scores else None
     closest = [best.id] if best else []
     left = leaves(residual(data, best.fitted), None) if best else {}
@@ -860,7 +876,8 @@ def select_causes(data: SelectionData, baseline, candidates: Sequence, alpha: fl
                      "structure_follows": rem_struct.top_features(3)})
     why = (f"the inputs predict the held-out residual (t = {rem_struct.comparison.t_stat:.1f}) but no "
            f"candidate does" + (f" (closest {best.id}: t = {best.comparison.t_stat:.1f})" if best else ""))
-    return Selection("unexplained", [], steps, baseline, base_struct, rem_struct, closest, left, why)
+    return Selection("unexplained", [], steps, baseline, base_struct, rem_struct, closest, left, why,
+                     run_level=run_level)
 
 
 # --- parameter intervals ------------------------------------------------------------------------

@@ -1,0 +1,85 @@
+"""A friction level that differs from run to run: found by the analysis of variance of the
+level over runs under every noise class, never on pure noise, and reported by the selection as
+``unexplained`` where it would otherwise say ``none``."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+
+from clutch_model.diagnosis.run_level import MIN_LEVEL_SD, run_level_test
+from clutch_model.diagnosis.selection import SelectionData, select_causes
+
+from .synthetic_residuals import NOISE_CLASSES, make_inputs, make_noise, split_every_third
+
+SIGMA_NM = 8.0
+LEVELS = np.array([0.0, 0.06, -0.05, 0.03, -0.02, 0.07])     # relative friction level per run
+
+
+def _campaign(seed, noise, levels=None):
+    d = make_inputs(seed, n_runs=6, duration_s=8.0)
+    run_id = np.cumsum(d["run_start"]) - 1
+    torque = 40.0 * d["torque"]           # hundreds of N·m, like the clutch
+    level = np.zeros(torque.size) if levels is None else np.asarray(levels)[run_id]
+    measured = torque * (1.0 + level) + make_noise(noise, d["run_start"], SIGMA_NM, 900 + seed)
+    return d, torque, measured, run_id
+
+
+@pytest.mark.parametrize("noise", NOISE_CLASSES)
+def test_level_per_run_found_and_estimated(noise):
+    d, torque, measured, run_id = _campaign(1, noise, LEVELS)
+    rows = np.ones(torque.size, bool)
+    res = run_level_test(measured - torque, torque, rows, d["run_start"], d["t"])
+    assert res.found, res.as_dict()
+    # the levels relative to their mean, within 1 % each; the spread near the truth's
+    est = np.asarray(res.levels)
+    assert np.max(np.abs((est - est.mean()) - (LEVELS - LEVELS.mean()))) < 0.01, res.levels
+    assert 0.5 * LEVELS.std() < res.between_sd < 1.5 * LEVELS.std(ddof=1)
+
+
+@pytest.mark.parametrize("noise", NOISE_CLASSES)
+def test_no_level_on_pure_noise(noise):
+    for seed in (2, 3, 4):
+        d, torque, measured, run_id = _campaign(seed, noise)
+        res = run_level_test(measured - torque, torque, np.ones(torque.size, bool), d["run_start"], d["t"])
+        assert not res.found, res.as_dict()
+        assert res.between_sd < MIN_LEVEL_SD
+
+
+def test_one_run_has_nothing_to_compare():
+    d, torque, measured, run_id = _campaign(5, "white", LEVELS)
+    one = run_id == 0
+    start = d["run_start"][one]
+    res = run_level_test((measured - torque)[one], torque[one], np.ones(one.sum(), bool), start, d["t"][one])
+    assert not res.found and len(res.levels) == 1
+
+
+@dataclass
+class _Torque:
+    """The baseline: predicts the clutch torque itself (the model the levels scale)."""
+    torque: np.ndarray
+    id: str = "baseline"
+    parameters: dict = None
+
+    def predict(self, data):
+        return self.torque
+
+
+def _selection(levels):
+    d, torque, measured, run_id = _campaign(6, "ar1_095", levels)
+    train, test = split_every_third(d["run_start"])
+    feats = np.column_stack([d["force"], np.abs(d["slip"])])
+    data = SelectionData(y=measured, t=d["t"], run_start=d["run_start"], train_mask=train, test_mask=test,
+                         features=feats, feature_names=["force", "slip"], groups=run_id)
+    return select_causes(data, _Torque(torque), [], intervals=False)
+
+
+def test_selection_says_unexplained_for_a_level_per_run_and_none_without():
+    sel = _selection(LEVELS)
+    assert sel.verdict == "unexplained", sel.reason
+    assert "friction level differs from run to run" in sel.reason
+    assert sel.run_level is not None and sel.run_level.found
+    sel = _selection(None)
+    assert sel.verdict == "none", sel.reason
+    assert sel.run_level is not None and not sel.run_level.found
