@@ -26,8 +26,9 @@ mean level, so what is left is their spread about it and the held-out runs' offs
 
 Measured on the matrix campaigns (`--quick`, four seen runs, one held out): at campaign seed 2
 the run_friction_level cells (spread 9.8 %; true seen-run levels 0.98, 1.06, 0.92, 0.99) give
-F = 45 (lab) and 48 (drift) on 3 and 12 dof, between-run sd 5.1-5.2 %: found; under AR(1) φ
-0.95 noise F = 7.6, p = 0.004: not found; one long drive has one level: nothing to compare. At
+F = 45 (lab), 27 (unaligned), 48 (drift) and 20 (median) on 3 and 12 dof, between-run sd
+4.4-5.6 %: found; lock-up (p = 0.0015), AR(1) φ 0.95 noise (p = 0.004) and held noise
+(p = 0.09): not found; one long drive has one level: nothing to compare. At
 seed 1 the true seen-run levels differ by sd 2 % and the test finds none. On the campaigns
 without an effect (eleven conditions at seed 2, ten at seed 1) the smallest p is 0.025 and
 the largest between-run sd 0.7 %.
