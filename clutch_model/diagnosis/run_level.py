@@ -7,12 +7,15 @@ over runs, with pieces of each run as the replicates:
 
 - each run's scored rows are cut into ``PIECES_PER_RUN`` pieces of at least ``MIN_PIECE_S``;
 - on each piece the residual is regressed on an offset, a slope in time and the model's own
-  torque (ordinary least squares); the torque coefficient is the piece's relative level
-  (residual = level × torque: a friction scale). The piece's own offset and slope take slow
-  sensor drift, which a mostly positive torque would otherwise pass for a level;
-- F = between-run mean square of the run means / within-run mean square, on (R - 1, R (K - 1))
-  degrees of freedom; the level's between-run standard deviation is the random-effects
-  estimate sqrt(max(between - within, 0) / K).
+  torque (generalised least squares, whitened with a noise model fitted to the residual); the
+  torque coefficient is the piece's relative level (residual = level × torque: a friction
+  scale), with its standard error. The piece's own offset and slope take slow sensor drift,
+  which a mostly positive torque would otherwise pass for a level;
+- each run's level is the inverse-variance weighted mean of its pieces; F = the between-run
+  weighted mean square / the within-run one (the pieces' scatter about their run's mean, which
+  rescales standard errors that a noise model got wrong by a factor), on (R - 1, pieces - R)
+  degrees of freedom; the level's between-run standard deviation is the DerSimonian-Laird
+  random-effects estimate with the rescaled errors.
 
 A level is reported when F is significant at ``ALPHA`` and the between-run standard deviation
 exceeds ``MIN_LEVEL_SD`` (materiality: a friction level is a few per cent; slow drift and
@@ -119,9 +122,9 @@ def run_level_test(residual: np.ndarray, torque: np.ndarray, rows: np.ndarray, r
             sel = idx[(t[idx] >= a) & (t[idx] <= b)]
             if sel.size < MIN_PIECE_ROWS or np.ptp(T[sel]) <= 0:
                 continue
-            b, se = _piece_level(r[sel], T[sel], t[sel], noise)
+            level, se = _piece_level(r[sel], T[sel], t[sel], noise)
             if math.isfinite(se) and se > 0:
-                lv.append((b, se))
+                lv.append((level, se))
         if len(lv) >= 2:
             per_run.append(np.asarray(lv))          # rows: (level, standard error)
     # inverse-variance weights; the within-run scatter of the pieces about their run's mean

@@ -403,9 +403,10 @@ def _swap_check(data, baseline, named, steps, cand_by_id, current, without, alph
     lookalike check ran without the causes after it. For each named cause and each of the
     SWAP_RIVALS best other candidates of the step that named it, the model of the other causes
     plus the rival (refitted in order, backfitted) meets the model with every cause head to
-    head on held-out data. A rival that takes the name (``_takes_the_name``: significantly better,
-    p < lookalike_alpha, without a larger plain held-out error) replaces the cause; a rival that the named model does not beat, and that holds on top of
-    the other causes, is a lookalike (-> ``unexplained``). Measured on
+    head on held-out data. A rival that takes the name (``_takes_the_name``: significantly
+    better, p < lookalike_alpha, without a larger plain held-out error) replaces the cause; a
+    rival that the named model does not beat, and that holds on top of the other causes, is a
+    lookalike (-> ``unexplained``). Measured on
     transport_delay+drag_torque@unaligned#1 (`--quick`, a 27 ms delay, torque at 50 Hz): the
     delay fitted without drag came out at 17 ms (t = 2.6), an actuator lag was named first
     (t = 6.1) and drag second, with nothing asking again whether the delay does better once
