@@ -512,7 +512,10 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
     discovery = None
     if discover and sel.verdict in DISCOVER_AFTER:
         t0 = time.perf_counter()
-        discovery = _discover(data, base, campaign, bench_model, say)
+        # the bag of each row: a sampled long log's windows are the sample's runs, one bag's
+        bag_of_row = S.source_index(campaign, names) if sampled is not None else campaign.run_index
+        discovery = _discover(data, base, campaign, bench_model, say,
+                              held_out_whole_bags(bag_of_row, data.train_mask, data.test_mask))
         timings["discovery"] = time.perf_counter() - t0
         if discovery.refused and sel.verdict == "none":
             # found, predictive on the held-out spans, but not checkable across runs: not noise
@@ -685,33 +688,35 @@ class DiscoveryOutcome:
         return out
 
 
-def _discover(data: SelectionData, base, campaign: Campaign, bench_model: ClutchModel, say) -> DiscoveryOutcome:
+def _discover(data: SelectionData, base, campaign: Campaign, bench_model: ClutchModel, say,
+              whole_bag_held_out: bool = True) -> DiscoveryOutcome:
     """Terms beyond the catalog (discovery.DiscoveryCandidate: sparse search + joint refit on
     the training rows only, friction anchored on the bench fit), judged by the same selection
     as the catalog: named only when it beats the noise model on held-out rows and nothing
-    predictable remains after it."""
+    predictable remains after it (and, for slip-angle terms, a bag is held out whole:
+    ``phase_unchecked``)."""
     from clutch_model.discovery.candidate import DiscoveryCandidate
 
     say("discovery: searching terms beyond the catalog on the fitted data")
     dsel = _judge_discovery(data, base, DiscoveryCandidate(campaign, bench_model=bench_model, progress=say), say)
     accepted = dsel.verdict == "named" and bool(dsel.causes and dsel.causes[0].parameters)
     if accepted:
-        why = phase_unchecked(data, dsel.causes[0].parameters)
+        why = phase_unchecked(dsel.causes[0].parameters, whole_bag_held_out)
         if why:
             say(f"discovery: not accepted: {why}")
             return DiscoveryOutcome(replace(dsel, verdict="unexplained", reason=why), False, why)
     return DiscoveryOutcome(dsel, accepted)
 
 
-def held_out_whole_runs(data: SelectionData) -> bool:
-    """True when some run is held out whole (held-out rows and no training rows)."""
-    run_id = np.cumsum(np.asarray(data.run_start, bool)) - 1
-    held = np.unique(run_id[data.test_mask])
-    trained = np.unique(run_id[data.train_mask])
+def held_out_whole_bags(bag_of_row: np.ndarray, train_mask: np.ndarray, test_mask: np.ndarray) -> bool:
+    """True when some bag is held out whole: held-out rows and no training rows."""
+    bag_of_row = np.asarray(bag_of_row)
+    held = np.unique(bag_of_row[np.asarray(test_mask, bool)])
+    trained = np.unique(bag_of_row[np.asarray(train_mask, bool)])
     return bool(np.setdiff1d(held, trained).size)
 
 
-def phase_unchecked(data: SelectionData, terms) -> str:
+def phase_unchecked(terms, whole_bag_held_out: bool) -> str:
     """Why a discovered extension with slip-angle terms cannot be checked, or ''.
 
     The slip angle is integrated from each run's start, so a once-per-revolution ripple's
@@ -720,9 +725,10 @@ def phase_unchecked(data: SelectionData, terms) -> str:
     that it carries to another bag. Measured on the stop-22 matrices (torque_ripple, a phase
     drawn per run): with time spans held out, the ripple terms were accepted four times and
     the gain on the unseen bags was +92, +22, -1 and -90 %; with whole runs held out it was
-    never accepted. Such an extension needs a run held out whole."""
+    never accepted. Such an extension needs a bag held out whole (``held_out_whole_bags``:
+    the windows of a sampled long log are runs of the sample but share their bag's origin)."""
     angle = [t for t in terms if "slip_angle" in t]
-    if not angle or held_out_whole_runs(data):
+    if not angle or whole_bag_held_out:
         return ""
     return (f"the discovered terms ({', '.join(angle)}) follow the slip angle, which restarts with each bag, "
             f"and only time spans of the fitted runs are held out: the ripple's phase cannot be checked on "
