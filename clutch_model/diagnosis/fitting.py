@@ -145,6 +145,27 @@ def _rmse(r):
     return float(np.sqrt(np.mean(r ** 2))) if r.size else math.nan
 
 
+def start_shift(x0: np.ndarray, specs) -> np.ndarray:
+    """Per coordinate of x, what to add so that no mechanism parameter starts at ~0.
+
+    scipy's trf takes its first trust-region radius as the norm of x0 in Jacobian-scaled units
+    (1 only when x0 is exactly 0), and stops on ``ftol`` when the first steps gain nothing.
+    A torque offset whose grid's best point is its centre (2.8e-14 N*m) or a drag coefficient
+    clipped to 1e-12 above its bound therefore never moved: on a campaign with a 15.3 N*m offset
+    the offset fitted on the bench friction stayed at 6e-14 N*m (from a start at exactly 0 the
+    same solver reaches 15.4 N*m). Such a coordinate is shifted by its
+    grid's spacing, which the radius then starts from; other coordinates are left alone, so
+    fits that did move are unchanged."""
+    shift = np.zeros_like(x0)
+    for j, s in enumerate(specs):
+        xs = np.array([s.to_x(v) for v in s.grid], dtype=float)
+        step = float(np.min(np.abs(np.diff(xs)))) if xs.size > 1 else 1.0
+        step = step if step > 0 and math.isfinite(step) else 1.0
+        if abs(x0[j]) < 1e-6 * step:
+            shift[j] = step
+    return shift
+
+
 def fit_candidate(base: ClutchModel, campaign: Campaign, fit_mask: np.ndarray, mech_id: str | None,
                   energy_total_j: float, torque_scale: float, fit_friction: bool = True,
                   max_nfev: int = 40, noise_sigma_nm: float = 1.0, start: dict | None = None) -> CandidateFit:
@@ -166,9 +187,13 @@ def fit_candidate(base: ClutchModel, campaign: Campaign, fit_mask: np.ndarray, m
         x0 = np.zeros(n_corr)
     x0 = np.clip(x0, lo + 1e-12, hi - 1e-12)
     if x0.size:
-        sol = least_squares(obj.residuals, x0, jac=obj.jacobian, bounds=(lo, hi), method="trf",
-                            x_scale="jac", max_nfev=max_nfev, xtol=1e-8, ftol=1e-8)
-        x = sol.x
+        # solved in u = x + shift: trf's first trust radius is |x0| in Jacobian-scaled units, so
+        # a start at ~0 (an offset's grid centre, a drag coefficient at its bound) would never move
+        shift = start_shift(x0, specs)
+        sol = least_squares(lambda u: obj.residuals(u - shift), x0 + shift, jac=lambda u: obj.jacobian(u - shift),
+                            bounds=(lo + shift, hi + shift), method="trf", x_scale="jac", max_nfev=max_nfev,
+                            xtol=1e-8, ftol=1e-8)
+        x = sol.x - shift
     else:
         x = x0
     model = obj.model_at(x)

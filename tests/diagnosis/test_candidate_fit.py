@@ -1,0 +1,74 @@
+"""A candidate's own parameter is recovered from a start at zero (diagnosis.fitting).
+
+The measured torque is the model's own prediction with the mechanism added, noise-free, so the
+least-squares optimum is the true value exactly. The starts are the ones the diagnosis meets:
+a torque offset smaller than its grid's spacing starts at the grid's centre (~0 N*m), a drag
+coefficient below its first non-zero grid point starts at its bound 0 -- both starts trf used
+to leave unmoved (its first trust radius is |x0|).
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from clutch_model.diagnosis.engine import smooth_sump
+from clutch_model.diagnosis.fitting import fit_candidate, search_space, start_shift
+from clutch_model.discovery.synthetic import _campaign_from
+from clutch_model.formats.bag_reader import Campaign, Run
+from clutch_model.plant.mechanisms import make_mechanism
+from clutch_model.plant.params import load_model
+from clutch_model.prediction import predict_campaign
+from clutch_model.virtual_car.campaign import CampaignSpec, synthesize_campaign
+
+
+@pytest.fixture(scope="module")
+def inputs():
+    spec = CampaignSpec(seed=5, n_runs=3, run_duration_s=4.0, rate_hz=100.0, friction_spread=0.0)
+    model = load_model(None)
+    result = synthesize_campaign(spec, base_model=model)
+    campaign, _ = _campaign_from(result, 0.0, np.random.default_rng(0))
+    return model, smooth_sump(campaign)
+
+
+def _measured(campaign, torque):
+    runs, k = [], 0
+    for r in campaign.runs:
+        n = r.t.size
+        runs.append(Run(name=r.name, t=r.t, applied_force_n=r.applied_force_n, slip_speed_rad_s=r.slip_speed_rad_s,
+                        sump_temperature_c=r.sump_temperature_c, torque_measured_nm=torque[k:k + n].copy(),
+                        start_time_ns=r.start_time_ns))
+        k += n
+    return Campaign(runs)
+
+
+@pytest.mark.parametrize("mech_id, name, true_value", [("torque_offset", "offset_nm", 15.3),
+                                                        ("torque_offset", "offset_nm", -7.0),
+                                                        ("drag_torque", "coeff_nm_per_rad_s", 0.6)])
+def test_a_parameter_starting_at_zero_reaches_the_truth(inputs, mech_id, name, true_value):
+    model, campaign = inputs
+    truth = model.with_mechanisms([make_mechanism(mech_id, **{name: true_value})])
+    campaign = _measured(campaign, predict_campaign(truth, campaign, energy0_j=0.0).torque_nm)
+    scale = float(np.nanpercentile(np.abs(campaign.torque_measured), 95))
+    spec = search_space(mech_id, campaign, 1e6, scale)[0]
+    grid = np.array(spec.grid)
+    # the start the grid gives is ~0, well away from the truth
+    assert abs(grid[np.argmin(np.abs(grid - true_value))]) < 1e-9
+    mask = np.ones(campaign.t.size, bool)
+    # from the grid, and from a start as a fit that did not move leaves it (the offset's grid
+    # centre is linspace's 2.8e-14 N*m on some campaigns, not 0)
+    for joint, start in ((False, None), (True, None), (False, {name: 2.8e-14}), (True, {name: 2.8e-14})):
+        fit = fit_candidate(model, campaign, mask, mech_id, 1e6, scale, fit_friction=joint, noise_sigma_nm=1.0,
+                            start=start)
+        assert fit.parameters[name] == pytest.approx(true_value, rel=0.02), (joint, start)
+        assert fit.fit_rmse_nm < 0.05 * abs(true_value)
+
+
+def test_start_shift_moves_only_starts_at_zero():
+    from clutch_model.plant.mechanisms import ParamSpec
+    specs = [ParamSpec("offset_nm", False, -100.0, 100.0, np.linspace(-20.0, 20.0, 11)),
+             ParamSpec("tau_s", True, 1e-4, 2.0, np.geomspace(0.005, 1.0, 10))]
+    x0 = np.array([1e-14, np.log(0.05), 0.0])
+    shift = start_shift(x0, specs)
+    assert shift[0] == pytest.approx(4.0)
+    assert shift[1] == 0.0 and shift[2] == 0.0
+    assert not start_shift(np.array([3.0, np.log(0.05)]), specs).any()
