@@ -153,9 +153,9 @@ def start_shift(x0: np.ndarray, specs) -> np.ndarray:
     A torque offset whose grid's best point is its centre (2.8e-14 N*m) or a drag coefficient
     clipped to 1e-12 above its bound therefore never moved: on a campaign with a 15.3 N*m offset
     the offset fitted on the bench friction stayed at 6e-14 N*m (from a start at exactly 0 the
-    same solver reaches 15.4 N*m). Such a coordinate is shifted by its
-    grid's spacing, which the radius then starts from; other coordinates are left alone, so
-    fits that did move are unchanged."""
+    same solver reaches 15.4 N*m). Such a coordinate is shifted by its grid's spacing, which the
+    radius then starts from; other coordinates are left alone, so fits that did move are
+    unchanged."""
     shift = np.zeros_like(x0)
     for j, s in enumerate(specs):
         xs = np.array([s.to_x(v) for v in s.grid], dtype=float)
@@ -193,7 +193,7 @@ def fit_candidate(base: ClutchModel, campaign: Campaign, fit_mask: np.ndarray, m
         sol = least_squares(lambda u: obj.residuals(u - shift), x0 + shift, jac=lambda u: obj.jacobian(u - shift),
                             bounds=(lo + shift, hi + shift), method="trf", x_scale="jac", max_nfev=max_nfev,
                             xtol=1e-8, ftol=1e-8)
-        x = sol.x - shift
+        x = np.clip(sol.x - shift, lo, hi)     # the shift's rounding kept off the bounds' wrong side
     else:
         x = x0
     model = obj.model_at(x)
