@@ -8,13 +8,15 @@ to leave unmoved (its first trust radius is |x0|).
 """
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
 from clutch_model.diagnosis.engine import smooth_sump
 from clutch_model.diagnosis.fitting import fit_candidate, search_space, start_shift
 from clutch_model.discovery.synthetic import _campaign_from
-from clutch_model.formats.bag_reader import Campaign, Run
+from clutch_model.formats.bag_reader import Campaign
 from clutch_model.plant.mechanisms import make_mechanism
 from clutch_model.plant.params import load_model
 from clutch_model.prediction import predict_campaign
@@ -31,14 +33,8 @@ def inputs():
 
 
 def _measured(campaign, torque):
-    runs, k = [], 0
-    for r in campaign.runs:
-        n = r.t.size
-        runs.append(Run(name=r.name, t=r.t, applied_force_n=r.applied_force_n, slip_speed_rad_s=r.slip_speed_rad_s,
-                        sump_temperature_c=r.sump_temperature_c, torque_measured_nm=torque[k:k + n].copy(),
-                        start_time_ns=r.start_time_ns))
-        k += n
-    return Campaign(runs)
+    """The campaign with ``torque`` (whole-campaign rows) as its measured torque."""
+    return Campaign([replace(r, torque_measured_nm=torque[sl].copy()) for r, sl in campaign.slices()])
 
 
 @pytest.mark.parametrize("mech_id, name, true_value", [("torque_offset", "offset_nm", 15.3),
