@@ -37,6 +37,8 @@ e.g. a gap longer than input_timeout_s in a bag's force makes the force stale (0
 """
 from __future__ import annotations
 
+import signal
+import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -85,7 +87,7 @@ class Player:
     def __init__(self, node, executor, namespace: str = "/clutch", *, clock: bool = False, rate: float = 1.0,
                  reset: bool = True, ack_timeout_s: float = 1.0, max_attempts: int = 20,
                  drain_timeout_s: float = 10.0, discovery_timeout_s: float = 20.0, recorder=None, progress: bool = True,
-                 node_alive=None):
+                 node_alive=None, stop_requested=None):
         from clutch_msgs.msg import ClutchState
         from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
         from rosgraph_msgs.msg import Clock
@@ -103,6 +105,7 @@ class Player:
         self.discovery_timeout_s = discovery_timeout_s
         self.recorder, self.progress = recorder, progress
         self.node_alive = node_alive or (lambda: True)   # live_replay: its node subprocess runs
+        self.stop_requested = stop_requested or (lambda: False)   # play(): a SIGINT noted
         qos = QoSProfile(reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST,
                          depth=100, durability=DurabilityPolicy.VOLATILE)
         self._Float64, self._Temperature, self._Clock = Float64, Temperature, Clock
@@ -140,8 +143,17 @@ class Player:
             left = deadline - time.monotonic()
             if left <= 0.0:
                 return False
-            self.executor.spin_once(timeout_sec=min(left, 0.05))
+            self.spin_once(min(left, 0.05))
         return True
+
+    def spin_once(self, timeout_sec: float) -> None:
+        """One executor spin, then a noted stop request raised as KeyboardInterrupt here, at a
+        point where it cannot be lost (a KeyboardInterrupt raised by the signal handler itself
+        can land in a finalizer run during the spin -- rclpy's Future.__del__ -- where Python
+        prints it and drops it: the play went on to the bag's end and exited 0)."""
+        self.executor.spin_once(timeout_sec=timeout_sec)
+        if self.stop_requested():
+            raise KeyboardInterrupt
 
     def wait_for_node(self) -> None:
         """Wait until the node's subscriptions (and in lock-step its clutch_state and /clock
@@ -277,7 +289,7 @@ class Player:
                 if left <= 0.0:
                     break
                 if left > 0.002:
-                    self.executor.spin_once(timeout_sec=left - 0.001)
+                    self.spin_once(left - 0.001)
                 elif left > 0.0004:
                     time.sleep(left - 0.0003)
             if self.recorder is not None:
@@ -328,16 +340,20 @@ def play(paths, namespace: str = "/clutch", *, clock: bool = False, rate: float 
     from rclpy.node import Node
 
     own = context is None
+    stop, noting = [], own and threading.current_thread() is threading.main_thread()
+    if noting:
+        # SIGINT only noted, and raised where the player spins (Player.spin_once), as record does
+        old_handler = signal.signal(signal.SIGINT, lambda signum, frame: stop.append(signum))
     if own:
         context = rclpy.Context()
-        rclpy.init(context=context, domain_id=domain_id)
+        rclpy.init(context=context, domain_id=domain_id)   # an own context: rclpy installs no handler
     node = Node("clutch_sim_play", context=context)
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
     recorder = None
     try:
         player = Player(node, executor, namespace, clock=clock, rate=rate, reset=reset, progress=progress,
-                        ack_timeout_s=ack_timeout_s, max_attempts=max_attempts)
+                        ack_timeout_s=ack_timeout_s, max_attempts=max_attempts, stop_requested=lambda: bool(stop))
         if record_out is not None:
             from clutch_sim_ros.record import Recorder
 
@@ -352,7 +368,7 @@ def play(paths, namespace: str = "/clutch", *, clock: bool = False, rate: float 
         if recorder is not None and not clock:  # the tail: outputs still in flight
             end = time.monotonic() + 0.6
             while time.monotonic() < end:
-                executor.spin_once(timeout_sec=0.05)
+                player.spin_once(0.05)
         return result
     finally:
         if recorder is not None:
@@ -361,3 +377,5 @@ def play(paths, namespace: str = "/clutch", *, clock: bool = False, rate: float 
         node.destroy_node()
         if own:
             context.try_shutdown()
+        if noting:   # None: a handler not set from Python, which cannot be put back
+            signal.signal(signal.SIGINT, signal.SIG_DFL if old_handler is None else old_handler)
