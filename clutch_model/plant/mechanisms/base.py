@@ -38,6 +38,9 @@ class Parameter:
     description: str = ""
 
 
+_LOG_MAX = math.log(np.finfo(float).max)
+
+
 @dataclass(frozen=True)
 class ParamSpec:
     """How a fit searches one parameter: transform, bounds and a start grid."""
@@ -51,7 +54,11 @@ class ParamSpec:
         return math.log(v) if self.log else float(v)
 
     def from_x(self, x):
-        return math.exp(x) if self.log else float(x)
+        """The parameter's value at ``x`` (a log-searched value beyond float range: inf, e.g.
+        the end of a wide interval)."""
+        if not self.log:
+            return float(x)
+        return math.exp(x) if x < _LOG_MAX else math.inf
 
 
 @dataclass(frozen=True)
