@@ -512,3 +512,27 @@ def test_a_log_parameter_beyond_float_range_reads_inf():
     spec = ParamSpec("energy_scale_j", True, 1.0, 1e12, np.zeros(1))
     assert spec.from_x(800.0) == np.inf
     assert spec.from_x(np.log(5e8)) == pytest.approx(5e8)
+
+
+def test_a_rival_of_equal_dimension_at_the_lookalike_level_may_take_the_name():
+    """Rivals of the leader: the nameable candidates, and those of the leader's dimension that
+    predict the held-out residual at the lookalike level (p < 0.01) -- they meet it on every row
+    (drag_torque@lowpass#3: the true drag at held-out p = 0.003 beside an offset at 8e-7).
+    A candidate of another dimension, or short of the lookalike level, is no rival."""
+    from clutch_model.diagnosis import selection as S
+    from clutch_model.diagnosis.structure_test import PredictiveComparison
+
+    d, names, X, train, test, cols, eps, groups = _campaign(7, "white")
+    data = _data(eps, d, names, X, train, test, groups)
+
+    def score(cid, p, sized=True):
+        fitted = (SizedCandidate if sized else LinearCandidate)(cid, cols["offset"]).fit(TrainingSet(data, Zero(), ()))
+        cmp = PredictiveComparison(delta_ll=10.0, t_stat=3.0, p_value=p, n_blocks=20, n_rows=1000, gain_frac=0.1,
+                                   rmse_null=9.0, rmse_alt=8.5)
+        return S.CandidateScore(cid, fitted, cmp, own=False)
+
+    best, near, other_dim, far, strong = (score("best", 1e-6), score("near", 3e-3), score("other_dim", 3e-3, False),
+                                          score("far", 0.05), score("strong", 1e-5, False))
+    stepper = S._Stepper(data, [], S.ALPHA, 0.005, True, S.LOOKALIKE_ALPHA, 8, 0, lambda *_: None)
+    rivals = stepper.rivals(best, [best, near, other_dim, far, strong])
+    assert [s.id for s in rivals] == ["near", "strong"]
