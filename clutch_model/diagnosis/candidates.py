@@ -96,6 +96,15 @@ class ModelFit:
         return np.asarray(predict_campaign([twin], self.context.campaign, energy0_j=0.0).torque_nm)[0]
 
     @property
+    def dynamic(self) -> bool:
+        """Its mechanism acts in time (a parameter in seconds: a lag, a delay), not as a torque
+        map; the baseline is neither (selection.head_to_head)."""
+        if self.id == "baseline":
+            return False
+        return any(par.unit == "s" for mech_id in self.id.split("+")
+                   for par in getattr(CATALOG.get(mech_id), "parameters", ()))
+
+    @property
     def below_resolution(self) -> str | None:
         """Why this fit cannot name its mechanism, or None. A time parameter (unit s: a lag, a
         delay) shorter than half the comparison rows' interval is below the data's time
