@@ -99,10 +99,16 @@ class ModelFit:
     def dynamic(self) -> bool:
         """Its mechanism acts in time (a parameter in seconds: a lag, a delay), not as a torque
         map; the baseline is neither (selection.head_to_head)."""
+        return any(True for _ in self._time_parameters())
+
+    def _time_parameters(self):
+        """(mechanism id, Parameter) of each parameter in seconds of this fit's mechanisms."""
         if self.id == "baseline":
-            return False
-        return any(par.unit == "s" for mech_id in self.id.split("+")
-                   for par in getattr(CATALOG.get(mech_id), "parameters", ()))
+            return
+        for mech_id in self.id.split("+"):
+            for par in getattr(CATALOG.get(mech_id), "parameters", ()):
+                if par.unit == "s":
+                    yield mech_id, par
 
     @property
     def below_resolution(self) -> str | None:
@@ -112,17 +118,12 @@ class ModelFit:
         rows is only timed to half a row interval (the midpoint force leaves a residual timing
         error of ~1 ms at 200 Hz: a "lag" of 0.5-1.3 ms was fitted on campaigns with nothing
         hidden), and topics stamped on their own clocks jitter by as much."""
-        if self.id == "baseline":
-            return None
         half_row_s = 0.5 * self.context.row_interval_s
-        ids = self.id.split("+")
-        for mech_id in ids:
-            cls = CATALOG.get(mech_id)
-            for par in getattr(cls, "parameters", ()):
-                v = self.fit.parameters.get(par.name)
-                if par.unit == "s" and isinstance(v, (int, float)) and v < half_row_s:
-                    return (f"{mech_id} {par.name} = {1e3 * v:.2g} ms is below the time resolution of the "
-                            f"data (half the {1e3 * self.context.row_interval_s:.3g} ms row interval)")
+        for mech_id, par in self._time_parameters():
+            v = self.fit.parameters.get(par.name)
+            if isinstance(v, (int, float)) and v < half_row_s:
+                return (f"{mech_id} {par.name} = {1e3 * v:.2g} ms is below the time resolution of the "
+                        f"data (half the {1e3 * self.context.row_interval_s:.3g} ms row interval)")
         return None
 
     def predict(self, data: SelectionData = None) -> np.ndarray:

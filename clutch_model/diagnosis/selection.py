@@ -457,6 +457,11 @@ def _swap_check(data, baseline, named, steps, cand_by_id, current, without, alph
     return current, named, swaps, looks
 
 
+def _refitted_friction_size(fit) -> int:
+    """How many friction-correction coefficients a fit moved (0 unless refitted jointly)."""
+    return int(np.size(getattr(fit, "friction_correction", ()))) if getattr(fit, "joint", False) else 0
+
+
 def static_dimension(fitted) -> int | None:
     """How many parameters a candidate's fit moved on the training rows -- its mechanism's, and
     the friction correction's when it was refitted jointly -- when its mechanism is static (a
@@ -465,13 +470,10 @@ def static_dimension(fitted) -> int | None:
     params = getattr(fit, "parameters", None)
     if fit is None or params is None or getattr(fitted, "dynamic", True):
         return None
-    n = len(params)
-    if getattr(fit, "joint", False):
-        n += int(np.size(getattr(fit, "friction_correction", ())))
-    return n
+    return len(params) + _refitted_friction_size(fit)
 
 
-def head_to_head(data: SelectionData, null_fitted, alt_fitted, max_order):
+def head_to_head(data: SelectionData, null_fitted, alt_fitted, max_order, resid_null=None, resid_alt=None):
     """Does ``alt_fitted`` predict the torque better than ``null_fitted``? Two static rivals
     that moved as many parameters on the same training rows (a drag coefficient and an offset,
     each with the friction correction: 11 and 11) meet on every row, training and held-out:
@@ -490,8 +492,12 @@ def head_to_head(data: SelectionData, null_fitted, alt_fitted, max_order):
     on the one held-out run, where torque noise held at 10 Hz leaves some 80 independent
     samples, the drag was the better (9.19 against 10.02) and was named; on
     drag_torque@lowpass#3 the drag fitted 8.25 against the offset's 10.99 and lost on the
-    held-out run's whitened errors."""
-    return _compare_rivals(data, residual(data, null_fitted), residual(data, alt_fitted),
+    held-out run's whitened errors. ``resid_null``, ``resid_alt``: their residuals, when known."""
+    if resid_null is None:
+        resid_null = residual(data, null_fitted)
+    if resid_alt is None:
+        resid_alt = residual(data, alt_fitted)
+    return _compare_rivals(data, resid_null, resid_alt,
                            static_dimension(null_fitted), static_dimension(alt_fitted), max_order)
 
 
@@ -504,8 +510,7 @@ def causes_dimension(causes) -> int | None:
         if fit is None:
             return None
         n += len(cause.parameters)
-        if getattr(fit, "joint", False):
-            friction = max(friction, int(np.size(getattr(fit, "friction_correction", ()))))
+        friction = max(friction, _refitted_friction_size(fit))
     return n + friction
 
 
@@ -532,10 +537,11 @@ def _head_to_head_winner(data, best, others, lookalike_alpha, max_order):
     seen = {best.id}
     while True:
         wins = []
+        resid_best = residual(data, best.fitted)
         for other in others:
             if other.id in seen:
                 continue
-            head = head_to_head(data, best.fitted, other.fitted, max_order)
+            head = head_to_head(data, best.fitted, other.fitted, max_order, resid_null=resid_best)
             if _takes_the_name(head, lookalike_alpha):
                 wins.append((head.t_stat, other))
         if not wins:
@@ -614,6 +620,7 @@ class _Stepper:
         if best is None or not self.nameable(best):
             return SelectionStep(scores, None, []), None
         best = _head_to_head_winner(data, best, self.rivals(best, scores), self.lookalike_alpha, self.max_order)
+        resid_best = residual(data, best.fitted)
         # a runner-up as significant as the best within a factor LOOKALIKE_P_RATIO counts, even
         # short of alpha when the best is near it: transport_delay+drag_torque@ar1#1 named a
         # torque-sensor lag at p = 0.0008 while actuator_lag (p = 0.0019, innovation variance
@@ -629,7 +636,7 @@ class _Stepper:
             # t = 3.5, the sensor lag short of its twin check; actuator_lag alone was a wrong name)
             if other is best or not self.explains(other, look_alpha):
                 continue
-            head = head_to_head(data, other.fitted, best.fitted, self.max_order)
+            head = head_to_head(data, other.fitted, best.fitted, self.max_order, resid_alt=resid_best)
             if not (head.p_value < self.lookalike_alpha and head.delta_ll > 0):
                 look.append(other.id)
         return SelectionStep(scores, best.id, look), best
