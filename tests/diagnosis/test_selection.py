@@ -345,6 +345,43 @@ def test_cause_made_redundant_by_later_causes_is_dropped():
     assert "mix dropped" in sel.reason
 
 
+@dataclass
+class HeldOutOnlyCandidate:
+    """A candidate whose fit leaves the training rows as they are and moves only the held-out
+    ones (as two refits that fit the training runs equally well extrapolate differently):
+    ``column`` is zero on the training rows."""
+    id: str
+    column: np.ndarray
+
+    def fit(self, train):
+        terms = dict(getattr(train.base, "terms", {}))
+        terms[self.id] = (self.column, 1.0)
+        return TermsFit(self.id, terms)
+
+
+@pytest.mark.parametrize("noise", ["white", "ar1_095", "held_10hz"])
+def test_cause_that_fits_the_training_rows_no_better_is_dropped(noise, monkeypatch):
+    """A second cause must hold on the training rows too: one that predicts the held-out rows
+    far better but leaves the training fit as it was has no evidence there (torque_offset@held
+    #3: a friction_degradation beside a true offset, training log-likelihood -4.1, won the one
+    held-out run at t = 4.2). Backward elimination drops it; without the training check it is
+    named beside the true cause."""
+    import clutch_model.diagnosis.selection as selection
+
+    d, names, X, train, test, cols, eps, groups = _campaign(4, noise)
+    y = 10.0 * cols["offset"] + eps
+    held_only = np.where(test, 0.5 * eps, 0.0)         # "predicts" the held-out noise, nothing on training rows
+    cands = [OwnGainCandidate("offset", cols["offset"]), HeldOutOnlyCandidate("held_only", held_only)]
+    data = _data(y, d, names, X, train, test, groups)
+    sel = select_causes(data, Zero(), cands, intervals=False)
+    assert sel.verdict == "named" and sel.cause_ids == ["offset"], sel.reason
+    assert "held_only dropped" in sel.reason and "training rows fit no better" in sel.reason, sel.reason
+    assert sel.causes[0].parameters["gain"] == pytest.approx(10.0, abs=1.0)
+    monkeypatch.setattr(selection, "short_of_training", lambda *a: False)
+    blind = select_causes(data, Zero(), cands, intervals=False)
+    assert sorted(blind.cause_ids) == ["held_only", "offset"], blind.reason
+
+
 def test_time_parameter_below_the_rows_resolution_is_not_named():
     """A lag shorter than half the comparison rows' interval is below what the rows resolve."""
     from clutch_model.diagnosis.candidates import CampaignContext, ModelFit
