@@ -510,12 +510,12 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
 
     # -- stage 3b: beyond the catalog (discovery), judged by the same held-out selection -------
     discovery = None
+    # the bag of each row: a sampled long log's windows are the sample's runs, one bag's
+    bag_of_row = S.source_index(campaign, names) if sampled is not None else campaign.run_index
+    whole_bag = held_out_whole_bags(bag_of_row, data.train_mask, data.test_mask)
     if discover and sel.verdict in DISCOVER_AFTER:
         t0 = time.perf_counter()
-        # the bag of each row: a sampled long log's windows are the sample's runs, one bag's
-        bag_of_row = S.source_index(campaign, names) if sampled is not None else campaign.run_index
-        discovery = _discover(data, base, campaign, bench_model, say,
-                              held_out_whole_bags(bag_of_row, data.train_mask, data.test_mask))
+        discovery = _discover(data, base, campaign, bench_model, say, whole_bag)
         timings["discovery"] = time.perf_counter() - t0
         if discovery.refused and sel.verdict == "none":
             # found, predictive on the held-out spans, but not checkable across runs: not noise
@@ -531,9 +531,7 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
         timings["discovery"] = time.perf_counter() - t0
     elif discover and sel.verdict == "named":
         t0 = time.perf_counter()
-        bag_of_row = S.source_index(campaign, names) if sampled is not None else campaign.run_index
-        sel, discovery = _catalog_or_beyond(data, base, campaign, bench_model, sel, cands, say,
-                                            held_out_whole_bags(bag_of_row, data.train_mask, data.test_mask))
+        sel, discovery = _catalog_or_beyond(data, base, campaign, bench_model, sel, cands, say, whole_bag)
         timings["discovery"] = time.perf_counter() - t0
 
     # -- stage 4: extend ------------------------------------------------------------------------
