@@ -510,9 +510,11 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
 
     # -- stage 3b: beyond the catalog (discovery), judged by the same held-out selection -------
     discovery = None
-    # the bag of each row: a sampled long log's windows are the sample's runs, one bag's
-    bag_of_row = S.source_index(campaign, names) if sampled is not None else campaign.run_index
-    whole_bag = held_out_whole_bags(bag_of_row, data.train_mask, data.test_mask)
+    whole_bag = True
+    if discover:
+        # the bag of each row: a sampled long log's windows are the sample's runs, one bag's
+        bag_of_row = S.source_index(campaign, names) if sampled is not None else campaign.run_index
+        whole_bag = held_out_whole_bags(bag_of_row, data.train_mask, data.test_mask)
     if discover and sel.verdict in DISCOVER_AFTER:
         t0 = time.perf_counter()
         discovery = _discover(data, base, campaign, bench_model, say, whole_bag)
@@ -565,21 +567,10 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
         cause = sel.causes[0].id
         extended_fit = sel.final.fit
         extended_model = extended_fit.model
-        for c in sel.causes:
-            causes.append({"id": c.id, "parameters": dict(c.parameters), "parameters_ci95": dict(c.parameters_ci95),
-                           "held_out_t": c.comparison.t_stat, "held_out_p": c.comparison.p_value,
-                           "innovation_variance_cut": c.comparison.gain_frac})
-        # the parameters as refitted in the final model (the later causes refit on top)
-        final_mechs = {m.id: m for m in extended_model.mechanisms}
-        for c in causes:
-            m = final_mechs.get(c["id"])
-            if m is not None:
-                c["parameters"] = {k: float(v) for k, v in m.values.items()
-                                   if isinstance(v, (int, float)) and k in c["parameters"]}
-        with_timing_resolution(causes, 0.5 * ctx.row_interval_s)
+        causes = cause_entries(sel.causes, extended_model, 0.5 * ctx.row_interval_s)
         cause_params = dict(causes[0]["parameters"])
         cause_ci = dict(causes[0]["parameters_ci95"])
-        if "friction_degradation" in final_mechs:
+        if any(m.id == "friction_degradation" for m in extended_model.mechanisms):
             _record_energy_history(extended_model, campaign if full is None else full)
     rmse["extended"] = _rmse(extended_fit.residual, eval_mask) if extended_fit else rmse["calibrated"]
     if cause == "unexplained":
@@ -865,22 +856,31 @@ def _catalog_or_beyond(data: SelectionData, base, campaign: Campaign, bench_mode
     return replace(sel, reason=why), DiscoveryOutcome(alone.selection, True)
 
 
-def _beside_discovered(discovery: DiscoveryOutcome, discovered: dict, model: ClutchModel,
-                       half_row_s: float) -> list:
-    """report.json's causes when a discovered extension is named beside catalog causes
-    (``discovery.order``), the catalog causes with their parameters as fitted in ``model``."""
+def cause_entries(named: list, model: ClutchModel, half_row_s: float) -> list:
+    """report.json's entries of named catalog causes (selection.Cause), with their parameters
+    as fitted in the final ``model`` (causes named later are refitted on top of the earlier
+    ones) and their time parameters' intervals widened to the rows' timing resolution."""
     mechs = {m.id: m for m in model.mechanisms}
-    by_id = {"discovered": discovered}
-    for c in discovery.beside:
-        m = mechs.get(c.id)
+    out = []
+    for c in named:
         params = dict(c.parameters)
+        m = mechs.get(c.id)
         if m is not None:
             params = {k: float(v) for k, v in m.values.items() if isinstance(v, (int, float)) and k in params}
-        by_id[c.id] = {"id": c.id, "parameters": params, "parameters_ci95": dict(c.parameters_ci95),
-                       "held_out_t": c.comparison.t_stat if c.comparison is not None else math.nan,
-                       "held_out_p": c.comparison.p_value if c.comparison is not None else math.nan,
-                       "innovation_variance_cut": c.comparison.gain_frac if c.comparison is not None else math.nan}
-    with_timing_resolution([by_id[c.id] for c in discovery.beside], half_row_s)
+        cmp = c.comparison
+        out.append({"id": c.id, "parameters": params, "parameters_ci95": dict(c.parameters_ci95),
+                    "held_out_t": cmp.t_stat if cmp is not None else math.nan,
+                    "held_out_p": cmp.p_value if cmp is not None else math.nan,
+                    "innovation_variance_cut": cmp.gain_frac if cmp is not None else math.nan})
+    return with_timing_resolution(out, half_row_s)
+
+
+def _beside_discovered(discovery: DiscoveryOutcome, discovered: dict, model: ClutchModel,
+                       half_row_s: float) -> list:
+    """report.json's causes when a discovered extension is named beside catalog causes, in
+    ``discovery.order``."""
+    by_id = {c["id"]: c for c in cause_entries(discovery.beside, model, half_row_s)}
+    by_id["discovered"] = discovered
     return [by_id[i] for i in discovery.order if i in by_id]
 
 

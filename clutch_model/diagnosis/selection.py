@@ -396,13 +396,13 @@ def _backward_elimination(data, baseline, named, cand_by_id, current, alpha, min
             without[cause.id] = model_wo
             resid_wo = residual(data, model_wo)
             cmp = _compare(data, resid_wo, resid_full, max_order)
-            short = None
-            if cmp.significant(alpha, min_gain_frac, plain_gain):
+            holds, short = cmp.significant(alpha, min_gain_frac, plain_gain), None
+            if holds:
                 ins = training_evidence(data, resid_wo, resid_full, max_order)
                 say(f"  {cause.id}: held-out t = {cmp.t_stat:.1f}, training log-likelihood {ins.delta_ll:+.1f}, "
                     f"innovation variance {-100 * ins.gain_frac:+.2f} %, mean square {-100 * ins.plain_gain_frac:+.2f} %")
                 short = ins if short_of_training(ins, len(cause.parameters), min_gain_frac) else None
-            if not cmp.significant(alpha, min_gain_frac, plain_gain) or short is not None:
+            if not holds or short is not None:
                 for c in causes_wo:
                     old = next(n for n in named if n.id == c.id)
                     c.comparison = old.comparison
