@@ -41,8 +41,12 @@ def report_dict(d: Diagnosis) -> dict:
     def structure(st):
         if st is None:
             return None
-        return {"structured": st.structured, "held_out_t": st.comparison.t_stat, "held_out_p": st.p_value,
-                "innovation_variance_cut": st.gain_frac, "follows": st.top_features(3)}
+        out = {"structured": st.structured, "held_out_t": st.comparison.t_stat, "held_out_p": st.p_value,
+               "innovation_variance_cut": st.gain_frac, "follows": st.top_features(3)}
+        if st.plain is not None:
+            out["cross_fit_plain"] = {"t": st.plain.t_stat, "p": st.plain.p_value, "blocks": st.plain.n_blocks,
+                                      "mean_square_cut": st.plain.cut_frac}
+        return out
 
     cause = {"id": d.cause_id, "evidence": d.evidence, "parameters": d.cause_parameters,
              "parameters_ci95": d.cause_ci95}

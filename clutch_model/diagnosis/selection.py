@@ -36,7 +36,7 @@ from clutch_model.diagnosis.structure_test import (ALPHA, BLOCK_S, MIN_GAIN_FRAC
                                                    StructureResult, block_labels, compare_residuals,
                                                    held_out_excess_test, per_run_structure_test,
                                                    structure_test)
-from clutch_model.diagnosis.run_level import RunLevelResult, run_level_test
+from clutch_model.diagnosis.run_level import RunLevelResult, run_level_tests
 
 LOOKALIKE_ALPHA = 0.01   # a runner-up is a lookalike unless the best beats it at this level (one-sided)
 LOOKALIKE_P_RATIO = 10.0  # ... counted when its held-out p is below alpha or this factor times the best's
@@ -821,6 +821,16 @@ def _unidentified(ci95: dict) -> bool:
     return False
 
 
+def _structure_figure(struct) -> str:
+    """The figure that found the structure: the whitened held-out t, or the per-run
+    cross-fit's cut in plain squares when only that found it."""
+    cmp, plain = struct.comparison, struct.plain
+    if plain is not None and not cmp.significant(ALPHA, 0.0) and plain.t_stat > 0:
+        return (f"each run's blocks predicted from its other blocks cut the plain mean square by "
+                f"{100 * plain.cut_frac:.0f} %, t = {plain.t_stat:.1f} over {plain.n_blocks} blocks")
+    return f"held-out t = {cmp.t_stat:.1f}"
+
+
 def leaves_of(data: SelectionData, resid, struct) -> dict:
     """What a model leaves on the held-out rows: RMSE and the structure found in it."""
     rows = data.test_mask & np.isfinite(resid)
@@ -829,6 +839,8 @@ def leaves_of(data: SelectionData, resid, struct) -> dict:
         out.update({"structure_t": struct.comparison.t_stat, "structure_p": struct.p_value,
                     "structure_gain_frac": struct.gain_frac,
                     "structure_follows": struct.top_features(3)})
+        if struct.plain is not None:
+            out["structure_cross_fit_plain_cut"] = struct.plain.cut_frac
     return out
 
 
@@ -849,8 +861,8 @@ def select_causes(data: SelectionData, baseline, candidates: Sequence, alpha: fl
     resid_cur = residual(data, current)
     say("structure test of the baseline residual")
     base_struct = _remainder_test(data, resid_cur, alpha, structure_min_gain_frac, max_order)
-    run_level = run_level_test(resid_cur, data.y - resid_cur, data.train_mask | data.test_mask, data.run_start,
-                               data.t)
+    run_level = run_level_tests(resid_cur, data.y - resid_cur, data.train_mask | data.test_mask, data.run_start,
+                                data.t)
     remaining = list(candidates)
     named: list = []
     steps: list = []
@@ -989,7 +1001,7 @@ def select_causes(data: SelectionData, baseline, candidates: Sequence, alpha: fl
                    f"{', '.join(unresolved)}")
         else:
             why = (f"after {', '.join(closest)} structure remains that the inputs predict "
-                   f"(held-out t = {rem_struct.comparison.t_stat:.1f}) and no candidate explains")
+                   f"({_structure_figure(rem_struct)}) and no candidate explains")
         return Selection("unexplained", [], steps, baseline, base_struct, rem_struct, closest + unresolved, left,
                          why, run_level=run_level)
     best = steps[0].scores[0] if steps and steps[0].scores else None
@@ -999,7 +1011,7 @@ def select_causes(data: SelectionData, baseline, candidates: Sequence, alpha: fl
         left.update({"structure_t": rem_struct.comparison.t_stat, "structure_p": rem_struct.p_value,
                      "structure_gain_frac": rem_struct.gain_frac,
                      "structure_follows": rem_struct.top_features(3)})
-    why = (f"the inputs predict the held-out residual (t = {rem_struct.comparison.t_stat:.1f}) but no "
+    why = (f"the inputs predict the held-out residual ({_structure_figure(rem_struct)}) but no "
            f"candidate does" + (f" (closest {best.id}: t = {best.comparison.t_stat:.1f})" if best else ""))
     return Selection("unexplained", [], steps, baseline, base_struct, rem_struct, closest, left, why,
                      run_level=run_level)

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
-from clutch_model.diagnosis.run_level import MIN_LEVEL_SD, run_level_test
+from clutch_model.diagnosis.run_level import MIN_LEVEL_SD, run_level_test, run_level_tests
 from clutch_model.diagnosis.selection import SelectionData, select_causes
 
 from .synthetic_residuals import NOISE_CLASSES, make_inputs, make_noise, split_every_third
@@ -42,9 +42,26 @@ def test_level_per_run_found_and_estimated(noise):
 def test_no_level_on_pure_noise(noise):
     for seed in (2, 3, 4):
         d, torque, measured, run_id = _campaign(seed, noise)
-        res = run_level_test(measured - torque, torque, np.ones(torque.size, bool), d["run_start"], d["t"])
+        rows = np.ones(torque.size, bool)
+        res = run_level_test(measured - torque, torque, rows, d["run_start"], d["t"])
         assert not res.found, res.as_dict()
         assert res.between_sd < MIN_LEVEL_SD
+        # unweighted pieces, and the pair the selection runs (each at half the level)
+        plain = run_level_test(measured - torque, torque, rows, d["run_start"], d["t"], whiten=False)
+        assert not plain.found and plain.p_value > 0.01, plain.as_dict()
+        both = run_level_tests(measured - torque, torque, rows, d["run_start"], d["t"])
+        assert not both.found and both.other is not None and not both.other.found
+
+
+@pytest.mark.parametrize("noise", NOISE_CLASSES)
+def test_level_per_run_found_by_the_pair_of_weightings(noise):
+    """The selection's pair of tests finds the levels under every noise class, and the one it
+    reports estimates them within 1.5 % each."""
+    d, torque, measured, run_id = _campaign(1, noise, LEVELS)
+    res = run_level_tests(measured - torque, torque, np.ones(torque.size, bool), d["run_start"], d["t"])
+    assert res.found and res.alpha == pytest.approx(0.0005), res.as_dict()
+    est = np.asarray(res.levels)
+    assert np.max(np.abs((est - est.mean()) - (LEVELS - LEVELS.mean()))) < 0.015, (res.weighting, res.levels)
 
 
 def test_one_run_has_nothing_to_compare():
