@@ -704,8 +704,7 @@ def _discover(data: SelectionData, base, campaign: Campaign, bench_model: Clutch
     dsel = _judge_discovery(data, base, DiscoveryCandidate(campaign, bench_model=bench_model, progress=say), say)
     accepted = dsel.verdict == "named" and bool(dsel.causes and dsel.causes[0].parameters)
     if accepted:
-        why = (phase_unchecked(dsel.causes[0].parameters, whole_bag_held_out)
-               or energy_unchecked(dsel.causes[0].parameters, whole_bag_held_out))
+        why = spans_cannot_check(dsel.causes[0].parameters, whole_bag_held_out)
         if why:
             say(f"discovery: not accepted: {why}")
             return DiscoveryOutcome(replace(dsel, verdict="unexplained", reason=why), False, why)
@@ -756,6 +755,12 @@ def energy_unchecked(terms, whole_bag_held_out: bool) -> str:
     return (f"the discovered terms ({', '.join(terms)}) follow only the energy dissipated so far, which grows "
             f"over the campaign like a clock, and only time spans of the fitted runs are held out: they cannot be "
             f"told from a friction level that differs from run to run (hold out a whole run to check them)")
+
+
+def spans_cannot_check(terms, whole_bag_held_out: bool) -> str:
+    """Why held-out time spans of the fitted runs cannot check a discovered extension (its
+    terms follow the slip angle, or the dissipated energy alone), or ''."""
+    return phase_unchecked(terms, whole_bag_held_out) or energy_unchecked(terms, whole_bag_held_out)
 
 
 def _judge_discovery(data: SelectionData, base, cand, say) -> Selection:
@@ -847,8 +852,7 @@ def _catalog_or_beyond(data: SelectionData, base, campaign: Campaign, bench_mode
     top = _judge_discovery(data, sel.final, DiscoveryCandidate(campaign, bench_model=bench_model, progress=say),
                            say)
     found = top.causes[0] if top.verdict == "named" and top.causes else None
-    if (found is None or not found.parameters or phase_unchecked(found.parameters, whole_bag_held_out)
-            or energy_unchecked(found.parameters, whole_bag_held_out)):
+    if found is None or not found.parameters or spans_cannot_check(found.parameters, whole_bag_held_out):
         say("nothing beyond the catalog holds on top of the named causes")
         return sel, None
     terms = ", ".join(found.parameters)

@@ -824,11 +824,20 @@ def _unidentified(ci95: dict) -> bool:
 def _structure_figure(struct) -> str:
     """The figure that found the structure: the whitened held-out t, or the per-run
     cross-fit's cut in plain squares when only that found it."""
-    cmp, plain = struct.comparison, struct.plain
-    if plain is not None and not cmp.significant(ALPHA, 0.0) and plain.t_stat > 0:
+    if struct.found_in_plain_squares:
+        plain = struct.plain
         return (f"each run's blocks predicted from its other blocks cut the plain mean square by "
                 f"{100 * plain.cut_frac:.0f} %, t = {plain.t_stat:.1f} over {plain.n_blocks} blocks")
-    return f"held-out t = {cmp.t_stat:.1f}"
+    return f"held-out t = {struct.comparison.t_stat:.1f}"
+
+
+def _structure_leaves(struct) -> dict:
+    """The structure found in what a model leaves, as report.json's ``closest_leaves`` shows it."""
+    out = {"structure_t": struct.comparison.t_stat, "structure_p": struct.p_value,
+           "structure_gain_frac": struct.gain_frac, "structure_follows": struct.top_features(3)}
+    if struct.plain is not None:
+        out["structure_cross_fit_plain_cut"] = struct.plain.cut_frac
+    return out
 
 
 def leaves_of(data: SelectionData, resid, struct) -> dict:
@@ -836,11 +845,7 @@ def leaves_of(data: SelectionData, resid, struct) -> dict:
     rows = data.test_mask & np.isfinite(resid)
     out = {"held_out_rmse": float(np.sqrt(np.mean(resid[rows] ** 2))) if rows.any() else math.nan}
     if struct is not None:
-        out.update({"structure_t": struct.comparison.t_stat, "structure_p": struct.p_value,
-                    "structure_gain_frac": struct.gain_frac,
-                    "structure_follows": struct.top_features(3)})
-        if struct.plain is not None:
-            out["structure_cross_fit_plain_cut"] = struct.plain.cut_frac
+        out.update(_structure_leaves(struct))
     return out
 
 
@@ -1008,9 +1013,7 @@ def select_causes(data: SelectionData, baseline, candidates: Sequence, alpha: fl
     closest = [best.id] if best else []
     left = leaves(residual(data, best.fitted), None) if best else {}
     if rem_struct is not None:
-        left.update({"structure_t": rem_struct.comparison.t_stat, "structure_p": rem_struct.p_value,
-                     "structure_gain_frac": rem_struct.gain_frac,
-                     "structure_follows": rem_struct.top_features(3)})
+        left.update(_structure_leaves(rem_struct))
     why = (f"the inputs predict the held-out residual ({_structure_figure(rem_struct)}) but no "
            f"candidate does" + (f" (closest {best.id}: t = {best.comparison.t_stat:.1f})" if best else ""))
     return Selection("unexplained", [], steps, baseline, base_struct, rem_struct, closest, left, why,

@@ -139,6 +139,7 @@ class StructureResult:
     feature_names: list = field(default_factory=list)
     prediction: np.ndarray | None = field(default=None, repr=False)   # fitted correction, all rows
     plain: PlainCrossFit | None = None     # per-run cross-fit scored in plain squares (per_run_structure_test)
+    found_in_plain_squares: bool = False   # structured by the plain score alone, the whitened test short of it
 
     @property
     def p_value(self) -> float:
@@ -629,9 +630,11 @@ def per_run_structure_test(residual: np.ndarray, X: np.ndarray, train_mask, test
     # every block of every run is predicted from its run's other blocks, so every row scores
     # the cross-fit in plain squares too (see plain_cross_fit_test)
     plain = plain_cross_fit_test(r, corr, rows_all, run_start, t, block_s)
-    structured = cmp.significant(alpha, min_gain_frac, noise_units=True) or plain.significant(alpha, MIN_PLAIN_CUT)
-    return StructureResult(structured=structured, comparison=cmp, coefficients=None,
-                           feature_names=list(feature_names or []), prediction=corr, plain=plain)
+    whitened = cmp.significant(alpha, min_gain_frac, noise_units=True)
+    in_plain = not whitened and plain.significant(alpha, MIN_PLAIN_CUT)
+    return StructureResult(structured=whitened or in_plain, comparison=cmp, coefficients=None,
+                           feature_names=list(feature_names or []), prediction=corr, plain=plain,
+                           found_in_plain_squares=in_plain)
 
 
 MIN_EXCESS = 0.12       # held-out innovation variance above the training one, materiality

@@ -52,3 +52,13 @@ def test_terms_in_the_dissipated_energy_alone_need_a_bag_held_out():
     assert energy_unchecked({"mu:slip_power@1.0s": -0.05, "mu:slip_abs*energy": 0.1}, spans) == ""
     assert energy_unchecked({"mu:energy": 1.86}, True) == ""
     assert energy_unchecked({}, spans) == ""
+
+
+def test_discovery_checks_both_reasons_spans_cannot_check():
+    from clutch_model.diagnosis.engine import energy_unchecked, spans_cannot_check
+
+    spans = held_out_whole_bags(BAG_OF_ROW, *_masks(np.r_[30:50, 130:150, 230:250]))
+    assert spans_cannot_check(RIPPLE, spans) == phase_unchecked(RIPPLE, spans) != ""
+    assert spans_cannot_check({"mu:energy": 1.86}, spans) == energy_unchecked({"mu:energy": 1.86}, spans) != ""
+    assert spans_cannot_check({"mu:pressure*pack_temperature": 2e-3}, spans) == ""
+    assert spans_cannot_check(RIPPLE, True) == spans_cannot_check({"mu:energy": 1.86}, True) == ""
