@@ -267,8 +267,8 @@ def _html(d: Diagnosis, rep: dict, files) -> str:
         left = d.selection.closest_leaves
         params = e(f"closest: {', '.join(d.selection.closest)}, which leaves a held-out RMSE of "
                    f"{left.get('held_out_rmse', float('nan')):.2f} N·m"
-                   + (f" with structure the inputs predict (t = {left['structure_t']:.1f})"
-                      if "structure_t" in left else ""))
+                   + (f" with structure the inputs predict ({left['structure_found_by']})"
+                      if "structure_found_by" in left else ""))
     else:
         params = ""
     rows = []

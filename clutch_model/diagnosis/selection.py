@@ -834,7 +834,8 @@ def _structure_figure(struct) -> str:
 def _structure_leaves(struct) -> dict:
     """The structure found in what a model leaves, as report.json's ``closest_leaves`` shows it."""
     out = {"structure_t": struct.comparison.t_stat, "structure_p": struct.p_value,
-           "structure_gain_frac": struct.gain_frac, "structure_follows": struct.top_features(3)}
+           "structure_gain_frac": struct.gain_frac, "structure_follows": struct.top_features(3),
+           "structure_found_by": _structure_figure(struct)}
     if struct.plain is not None:
         out["structure_cross_fit_plain_cut"] = struct.plain.cut_frac
     return out

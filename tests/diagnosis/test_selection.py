@@ -213,6 +213,9 @@ def test_effect_outside_the_candidates_is_unexplained():
     sel = select_causes(_data(y, d, names, X, train, test, groups), Zero(), cands)
     assert sel.verdict == "unexplained", sel.reason
     assert sel.closest and sel.closest_leaves["structure_p"] < 1e-3
+    leaves = sel.closest_leaves      # the figure that found it, in words (report.html shows this)
+    assert leaves["structure_found_by"] in (f"held-out t = {leaves['structure_t']:.1f}",) or \
+        leaves["structure_found_by"].startswith("each run's blocks predicted from its other blocks")
 
 
 def test_jackknife_interval_without_sensitivity():
