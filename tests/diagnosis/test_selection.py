@@ -407,6 +407,42 @@ def test_time_parameter_below_the_rows_resolution_is_not_named():
     assert fit("spring_preload", preload_n=1.0).below_resolution is None
 
 
+@pytest.mark.parametrize("noise_n", [5.0, 20.0, 60.0])
+def test_hysteresis_band_within_the_force_noise_is_not_named(noise_n):
+    """A hysteresis band (ratio x the typical force) narrower than twice the force sensor's
+    noise is below the force's resolution: the force noise is estimated from each run's own
+    force samples (white noise of sd noise_n on a smooth profile: within 10 %)."""
+    from types import SimpleNamespace
+
+    from clutch_model.diagnosis.candidates import FORCE_BAND_NOISE_FACTOR, CampaignContext, ModelFit
+    from clutch_model.diagnosis.fitting import CandidateFit
+
+    rng = np.random.default_rng(7)
+    t = np.arange(0, 10, 0.005)
+    runs, force = [], []
+    for k in range(2):
+        profile = 3000.0 + 1500.0 * np.sin(2 * np.pi * 0.3 * t + k)        # median 3000 N
+        f = profile + noise_n * rng.standard_normal(t.size)
+        runs.append(SimpleNamespace(samples={"applied_force": (t, f)}, applied_force_n=f))
+        force.append(f)
+    force = np.concatenate(force)
+    camp = SimpleNamespace(runs=runs, force=force, torque_measured=np.where(np.arange(force.size) % 7 == 0, np.nan, 1.0),
+                           t=np.r_[t, t], run_start=np.r_[True, np.zeros(t.size - 1, bool), True,
+                                                         np.zeros(t.size - 1, bool)])
+    ctx = CampaignContext(camp, 0.0, 100.0, 8.0)
+    assert ctx.force_noise_n == pytest.approx(noise_n, rel=0.1)
+    assert ctx.typical_force_n == pytest.approx(3000.0, rel=0.02)
+    edge = FORCE_BAND_NOISE_FACTOR * noise_n / 3000.0      # the ratio whose band is at the limit
+
+    def fit(mech, **params):
+        return ModelFit(mech, CandidateFit(mech, None, params, np.zeros(10), 1.0), None, ctx, np.ones(force.size, bool))
+
+    assert "below the force's resolution" in fit("actuator_hysteresis", ratio=0.7 * edge).below_resolution
+    assert fit("actuator_hysteresis", ratio=1.4 * edge).below_resolution is None
+    assert fit("actuator_hysteresis", ratio=0.05).below_resolution is None      # a real play: 150 N
+    assert fit("spring_preload", preload_n=1.0).below_resolution is None        # no band on the force
+
+
 @pytest.mark.parametrize("seed", [2, 3, 4])
 def test_cause_named_before_the_second_one_meets_its_rivals_again(seed):
     """C = A + 0.4 B + 0.7 D looks best alone when y = A + B (it carries part of B); once B is

@@ -12,6 +12,7 @@ class ActuatorHysteresis(Mechanism):
     physics = "ball-ramp friction: pack force moves only when the band F(1±ratio) pushes it"
     virtual_car = VirtualCarRange(visible=(0.05, 0.2), default=0.12)
     kernel_slot = layout.HYST_RATIO
+    force_band = "ratio"
 
     @classmethod
     def search_space(cls, scale):

@@ -101,6 +101,8 @@ class Mechanism:
     kernel_slot = None             # index in the kernel parameter vector (plant mechanisms)
     diagnosis_candidate = True     # fitted as a candidate by `clutch-sim diagnose`
     state_keys = ()                # non-fitted entries carried in the model file (campaign state)
+    force_band = None              # parameter that is a band on the force as a share of it (a play
+                                   # operator's half-width): resolved only when wider than the force noise
 
     # -- description --------------------------------------------------------------------
     @property
