@@ -519,6 +519,8 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
         t0 = time.perf_counter()
         discovery = _discover(data, base, campaign, bench_model, say, whole_bag)
         timings["discovery"] = time.perf_counter() - t0
+        if discovery.accepted and sel.steps:
+            sel, discovery = _against_catalog_rival(data, sel, discovery, say)
         if discovery.refused and sel.verdict == "none":
             # found, predictive on the held-out spans, but not checkable across runs: not noise
             sel = replace(sel, verdict="unexplained", closest=["discovered"],
@@ -709,6 +711,29 @@ def _discover(data: SelectionData, base, campaign: Campaign, bench_model: Clutch
             say(f"discovery: not accepted: {why}")
             return DiscoveryOutcome(replace(dsel, verdict="unexplained", reason=why), False, why)
     return DiscoveryOutcome(dsel, accepted)
+
+
+def _against_catalog_rival(data: SelectionData, sel: Selection, discovery: DiscoveryOutcome, say) -> tuple:
+    """A discovered extension named where the catalog named nothing meets the catalog's
+    candidates once more (selection.rival_of_extension): when one of them explains the
+    held-out residual as well, the two are lookalikes and the verdict is ``unexplained``,
+    both reported as closest. -> (selection, discovery outcome)."""
+    from clutch_model.diagnosis.selection import rival_of_extension
+
+    found = discovery.cause
+    rival = rival_of_extension(data, sel.steps[0].scores, found, alpha=ALPHA, min_gain_frac=NAMED_GAIN_FRAC)
+    if rival is None:
+        return sel, discovery
+    sc, head = rival
+    why = (f"the extension found beyond the catalog ({', '.join(found.parameters)}, held-out t = "
+           f"{found.comparison.t_stat:.1f}) cannot be told apart on held-out data from the catalog's {sc.id} "
+           f"(held-out t = {sc.comparison.t_stat:.1f}; the extension against it: t = {head.t_stat:.1f})")
+    say(f"discovery: not accepted: {why}")
+    from clutch_model.diagnosis.selection import leaves_of
+
+    sel = replace(sel, verdict="unexplained", closest=[sc.id, "discovered"], reason=f"{sel.reason}; but {why}",
+                  closest_leaves=leaves_of(data, residual(data, sc.fitted), None))
+    return sel, DiscoveryOutcome(replace(discovery.selection, verdict="unexplained", reason=why), False, why)
 
 
 def held_out_whole_bags(bag_of_row: np.ndarray, train_mask: np.ndarray, test_mask: np.ndarray) -> bool:

@@ -625,3 +625,36 @@ def test_a_rival_of_equal_dimension_at_the_lookalike_level_may_take_the_name():
               score("far", 0.05), score("strong", 1e-5, "unsized")]
     stepper = S._Stepper(data, [], S.ALPHA, 0.005, True, S.LOOKALIKE_ALPHA, 8, 0, lambda *_: None)
     assert [s.id for s in stepper.rivals(best, [best] + others)] == ["near", "strong"]
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_extension_found_beyond_the_candidates_meets_them_as_lookalikes(seed):
+    """An extension found by a search (here a near-copy of a candidate's column, as "the torque
+    gains c per rad/s of slip" is the catalog drag without its viscosity factor) is no name when
+    a candidate explains the held-out residual as well; one that carries more than any
+    candidate (the truth is beyond them) or that no candidate comes near keeps its name."""
+    from clutch_model.diagnosis.selection import rival_of_extension
+
+    d, names, X, train, test, cols, eps, groups = _campaign(seed, "ar1_095")
+    catalog = [LinearCandidate(k, v) for k, v in cols.items() if k != "temperature"]
+
+    def found_and_scores(y, column):
+        data = _data(y, d, names, X, train, test, groups)
+        ext = select_causes(data, Zero(), [LinearCandidate("extension", column)], max_causes=1, intervals=False)
+        assert ext.verdict == "named", ext.reason
+        return data, ext.causes[0], select_causes(data, Zero(), catalog, intervals=False).steps[0].scores
+
+    # the truth is a candidate; the extension a near-copy of it: the candidate is its lookalike
+    y = 0.03 * cols["slip_power"] + eps
+    data, found, scores = found_and_scores(y, 0.9 * cols["slip_power"] + 0.1 * cols["slip"])
+    rival = rival_of_extension(data, scores, found)
+    assert rival is not None and rival[0].id == "slip_power"
+    # the truth is beyond the candidates and the extension finds it: no candidate comes near
+    y = 0.1 * cols["temperature"] + eps
+    data, found, scores = found_and_scores(y, cols["temperature"])
+    assert rival_of_extension(data, scores, found) is None
+    # the truth is partly a candidate: the extension carries more and beats it head to head
+    y = 0.03 * cols["slip_power"] + 0.1 * cols["temperature"] + eps
+    data, found, scores = found_and_scores(y, 0.03 * cols["slip_power"] + 0.1 * cols["temperature"])
+    assert any(s.id == "slip_power" and s.comparison.p_value < 1e-3 for s in scores)
+    assert rival_of_extension(data, scores, found) is None
