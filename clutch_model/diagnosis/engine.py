@@ -39,7 +39,8 @@ from clutch_model.diagnosis.input_hold import decide_input_noise, with_midpoint_
 from clutch_model.diagnosis.lockup import without_locked_torque
 from clutch_model.diagnosis.fitting import CANDIDATE_IDS, CandidateFit, fit_candidate
 from clutch_model.diagnosis.noise_model import fit_noise_model, white_floor
-from clutch_model.diagnosis.selection import Selection, SelectionData, refit_chain, residual, select_causes
+from clutch_model.diagnosis.selection import (Selection, SelectionData, leaves_of, refit_chain, residual,
+                                               rival_of_extension, select_causes)
 from clutch_model.diagnosis.split import Split, choose_split
 from clutch_model.diagnosis import sample as S
 from clutch_model.diagnosis.sample import DEFAULT_BUDGET_S
@@ -718,8 +719,6 @@ def _against_catalog_rival(data: SelectionData, sel: Selection, discovery: Disco
     candidates once more (selection.rival_of_extension): when one of them explains the
     held-out residual as well, the two are lookalikes and the verdict is ``unexplained``,
     both reported as closest. -> (selection, discovery outcome)."""
-    from clutch_model.diagnosis.selection import rival_of_extension
-
     found = discovery.cause
     rival = rival_of_extension(data, sel.steps[0].scores, found, alpha=ALPHA, min_gain_frac=NAMED_GAIN_FRAC)
     if rival is None:
@@ -729,8 +728,6 @@ def _against_catalog_rival(data: SelectionData, sel: Selection, discovery: Disco
            f"{found.comparison.t_stat:.1f}) cannot be told apart on held-out data from the catalog's {sc.id} "
            f"(held-out t = {sc.comparison.t_stat:.1f}; the extension against it: t = {head.t_stat:.1f})")
     say(f"discovery: not accepted: {why}")
-    from clutch_model.diagnosis.selection import leaves_of
-
     sel = replace(sel, verdict="unexplained", closest=[sc.id, "discovered"], reason=f"{sel.reason}; but {why}",
                   closest_leaves=leaves_of(data, residual(data, sc.fitted), None))
     return sel, DiscoveryOutcome(replace(discovery.selection, verdict="unexplained", reason=why), False, why)
