@@ -17,7 +17,7 @@ import numpy as np
 
 from clutch_model.diagnosis.fitting import CampaignObjective, CandidateFit, fit_candidate, search_space
 from clutch_model.plant.mechanisms import CATALOG
-from clutch_model.diagnosis.input_hold import high_frequency_noise
+from clutch_model.diagnosis.input_hold import _samples, high_frequency_noise
 from clutch_model.diagnosis.selection import ParameterSensitivity, SelectionData, TrainingSet, row_interval_s
 
 FORCE_BAND_NOISE_FACTOR = 2.0   # a band on the force must be this many times the force noise wide
@@ -59,9 +59,8 @@ class CampaignContext:
     def force_noise_n(self) -> float:
         """The applied force's sensor noise near its Nyquist frequency (white-equivalent sd, N),
         from each run's own force samples (input_hold.high_frequency_noise)."""
-        runs = [run.samples["applied_force"][1] if run.samples.get("applied_force") is not None
-                else run.applied_force_n for run in self.campaign.runs]
-        return high_frequency_noise(runs)
+        return high_frequency_noise([_samples(run, "applied_force", run.applied_force_n)[1]
+                                     for run in self.campaign.runs])
 
     @cached_property
     def typical_force_n(self) -> float:

@@ -594,6 +594,22 @@ def _head_to_head_winner(data, best, others, lookalike_alpha, max_order):
         seen.add(best.id)
 
 
+def _nameable(data: SelectionData, s: CandidateScore, alpha: float, min_gain_frac: float, plain_gain: bool,
+              max_order: int) -> bool:
+    """A scored candidate may take a name at ``alpha``: it predicts the held-out residual
+    better than the model so far (significant, material), its parameters are resolved by the
+    data, and its mechanism beats its twin (``_own_contribution``, computed once per score)."""
+    if not s.comparison.significant(alpha, min_gain_frac, plain_gain) or _below_resolution(s.fitted):
+        return False
+    if s.own is None:
+        s.own, s.own_pieces = _own_contribution(data, s.fitted, max_order)
+    # the mechanism's own gain, material in the torque's own units too: a gain in the
+    # whitened one-step errors alone is the high-frequency part (under AR(1) 0.9 noise a
+    # deadband on the force noise: car / none / 44, t = 4.2, innovation variance -2.2 %,
+    # plain held-out mean square -0.03 %)
+    return s.own is False or s.own.significant(alpha, min_gain_frac, plain_gain, noise_units=True)
+
+
 class _Stepper:
     """One forward step: every remaining candidate fitted on the training rows on top of the
     model so far (the best few by training error refined), each compared with the model so far
@@ -615,17 +631,8 @@ class _Stepper:
                 and not _below_resolution(s.fitted))
 
     def nameable(self, s: CandidateScore, alpha: float | None = None) -> bool:
-        data = self.data
-        alpha = self.alpha if alpha is None else alpha
-        if not s.comparison.significant(alpha, self.min_gain_frac, self.plain_gain) or _below_resolution(s.fitted):
-            return False
-        if s.own is None:
-            s.own, s.own_pieces = _own_contribution(data, s.fitted, self.max_order)
-        # the mechanism's own gain, material in the torque's own units too: a gain in the
-        # whitened one-step errors alone is the high-frequency part (under AR(1) 0.9 noise a
-        # deadband on the force noise: car / none / 44, t = 4.2, innovation variance -2.2 %,
-        # plain held-out mean square -0.03 %)
-        return s.own is False or s.own.significant(alpha, self.min_gain_frac, self.plain_gain, noise_units=True)
+        return _nameable(self.data, s, self.alpha if alpha is None else alpha, self.min_gain_frac, self.plain_gain,
+                         self.max_order)
 
     def rivals(self, best: CandidateScore, scores: list) -> list:
         """The candidates that may take the name from ``best`` head to head: the nameable ones,
@@ -703,12 +710,7 @@ def rival_of_extension(data: SelectionData, scores: list, found, alpha: float = 
     level = max(alpha, LOOKALIKE_P_RATIO * found.comparison.p_value)
     resid_found = residual(data, found.fitted)
     for sc in sorted(scores, key=lambda s: s.comparison.p_value):
-        cmp = sc.comparison
-        if not cmp.significant(level, min_gain_frac, plain_gain=True) or _below_resolution(sc.fitted):
-            continue
-        if sc.own is None:
-            sc.own, sc.own_pieces = _own_contribution(data, sc.fitted, max_order)
-        if sc.own is not False and not sc.own.significant(level, min_gain_frac, plain_gain=True, noise_units=True):
+        if not _nameable(data, sc, level, min_gain_frac, True, max_order):
             continue
         head = head_to_head(data, sc.fitted, found.fitted, max_order, resid_alt=resid_found)
         if not (head.p_value < LOOKALIKE_ALPHA and head.delta_ll > 0):
