@@ -38,6 +38,11 @@ Effects outside the catalog (``effects``: [{"name": ..., parameter: value}]):
                          (tau_s 1.0) filter: reversible fade, mimics friction_degradation
   pressure_temperature_cross coeff   μ_f × (1 + c·P·(θ_pack − 60 °C)), P in MPa
   run_friction_level     spread      μ_f × (1 + U(−s, s)) drawn per run
+  actuator_rate_limit    rate_n_per_s  the pack force follows the measured force at a slew rate
+                                     of at most R (a motor's speed limit): mimics actuator_lag
+                                     on fast edges, nothing on slow ones (a force-path effect:
+                                     the plant is driven by the limited force, the force sensor
+                                     reads the request)
 Plant effects (the last three) run in ``_trajectory_friction_factor``, the kernels' own step
 functions with the friction factor written through the degradation slot each row (so the
 factor heats the pack like any friction); measurement effects post-process the fine grid.
@@ -83,6 +88,10 @@ EFFECTS = {
     "run_friction_level": {"kind": "friction", "parameters": {"spread": 0.08},
                            "mimics": None, "catalog_equivalent": None,
                            "physics": "mu_f x (1 + U(-s, s)) per run (lining / oil state of the day)"},
+    "actuator_rate_limit": {"kind": "force-path", "parameters": {"rate_n_per_s": 40000.0},
+                            "mimics": "actuator_lag", "catalog_equivalent": None,
+                            "physics": "the actuator's motor slews the pack force at most "
+                                       "rate_n_per_s toward the measured force (slew-rate limit)"},
 }
 
 DEFAULT_CLOCKS = {
@@ -425,6 +434,20 @@ def _simulate_plant(model: ClutchModel, spec: CarLogSpec, t, force, slip, sump, 
             "power": out[:, K.O_POWER], "mu": out[:, K.O_MU]}, info
 
 
+@njit(cache=True)
+def _slew_limited(force, run_start, step_n):
+    """The force each fine row reaches when it may move at most ``step_n`` per row toward the
+    request (restarted at the request at each run's start)."""
+    out = np.empty_like(force)
+    for k in range(force.size):
+        if k == 0 or run_start[k]:
+            out[k] = force[k]
+        else:
+            d = force[k] - out[k - 1]
+            out[k] = out[k - 1] + min(max(d, -step_n), step_n)
+    return out
+
+
 def _lowpass_per_run(t, y, run_start, tau_s):
     out = np.empty_like(y)
     starts = list(np.flatnonzero(run_start)) + [y.size]
@@ -477,7 +500,11 @@ def synthesize_car_logs(spec: CarLogSpec | None = None, base_model: ClutchModel 
 
     if progress:
         progress("simulating the true plant on the fine grid")
-    plant, eff_info = _simulate_plant(true_model, spec, t_abs, force_all, slip_all, sump_all, run_start, rng_eff)
+    force_pack = force_all
+    rate = spec.effect_values("actuator_rate_limit")
+    if rate is not None:
+        force_pack = _slew_limited(force_all, run_start, float(rate["rate_n_per_s"]) / spec.fine_rate_hz)
+    plant, eff_info = _simulate_plant(true_model, spec, t_abs, force_pack, slip_all, sump_all, run_start, rng_eff)
     # the driveline sets the transmitted torque while locked (below the static capacity)
     locked = plant["locked"] & np.isfinite(load_all)
     transmitted = np.where(locked, np.nan_to_num(load_all) * plant["torque"], plant["torque"])
@@ -742,11 +769,19 @@ def measurement_tail_s(spec: "CarLogSpec") -> float:
 
 def near_true_lock(sidecar: dict, t_s, lock_pad_s: float = 0.1, tail_s: float = 0.0) -> np.ndarray:
     """Times (s from the bag's first message) where the noise-free sensor reading is set by the
-    driveline, not the clutch: inside a true lock phase widened by ``lock_pad_s`` on both sides
+    driveline, not the clutch, or not timed by the sampled inputs: inside a true lock phase widened by ``lock_pad_s`` on both sides
     and by ``tail_s`` more after it (``measurement_tail_s``: the sensor shows the lock's torque
-    that much later)."""
+    that much later); and around each zero crossing of the true slip (the friction torque flips
+    sign there, and a replay that holds the latest slip sample times the flip only to a slip
+    sample)."""
     t_s = np.asarray(t_s, float)
     ft, fl = sidecar["fine_t_s"], sidecar["fine_locked"].astype(float)
+    slip = sidecar.get("fine_slip_speed_rad_s")
+    if slip is not None and slip.size > 1:
+        flip = np.sign(slip[:-1]) * np.sign(slip[1:]) < 0
+        fl = fl.copy()
+        fl[:-1][flip] = 1.0
+        fl[1:][flip] = 1.0
     near = np.interp(t_s, ft, fl) > 0
     if not fl.any():
         return near

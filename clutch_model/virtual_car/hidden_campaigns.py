@@ -65,6 +65,7 @@ class Condition:
     torque_noise: tuple = ("white", {})
     slip_noise: tuple | None = None
     lockup: bool = False
+    slip_sign_changes: bool = False
     schedule: str = "short-runs"
     size: tuple = (6, 2, 8.0)
     quick_size: tuple = (4, 2, 8.0)
@@ -76,7 +77,7 @@ class Condition:
         if self.slip_noise is not None:
             noise["slip_speed"] = make_noise(self.slip_noise[0], 0.05, **self.slip_noise[1])
         kw = {"schedule": self.schedule, "n_runs": seen + unseen, "run_duration_s": dur,
-              "noise": noise, "lockup": self.lockup}
+              "noise": noise, "lockup": self.lockup, "slip_sign_changes": self.slip_sign_changes}
         if self.clocks == "lab":
             kw.update(clocks=dict(LAB_CLOCKS), random_phase=False)
         return kw
@@ -102,6 +103,8 @@ CONDITIONS = {c.name: c for c in (
               torque_noise=("drift", {"drift": 4.0, "tau_s": 10.0})),
     Condition("lockup", "lock-up phases: slip exactly 0, the driveline sets the torque", "lockup",
               lockup=True),
+    Condition("sign_changes", "the slip changes sign while slipping (crossing 0 in ~0.1 s), topics on "
+                              "their own clocks", "slip-sign", clocks="car", slip_sign_changes=True),
     Condition("long_drive", "one long drive in one bag (a later bag held out)", "one-bag",
               schedule="long-drive", size=(1, 1, 120.0), quick_size=(1, 1, 40.0)),
     Condition("few_long", "few long runs", "few-long", schedule="few-long",
@@ -120,7 +123,8 @@ EFFECT_RANGES = {"torque_sensor_lowpass": ("tau_s", (0.02, 0.15)),
                  "slip_power_fade": ("k_per_kw", (0.03, 0.08)),
                  "run_friction_level": ("spread", (0.06, 0.12)),
                  "torque_ripple": ("amplitude", (0.05, 0.15)),
-                 "pressure_temperature_cross": ("coeff", (1.5e-3, 4e-3))}
+                 "pressure_temperature_cross": ("coeff", (1.5e-3, 4e-3)),
+                 "actuator_rate_limit": ("rate_n_per_s", (2.0e4, 6.0e4))}
 
 
 @dataclass(frozen=True)
@@ -141,7 +145,7 @@ def _cases() -> dict:
              ("transport_delay", "drag_torque"))]
     out += [Case(e, "lookalike" if EFFECTS[e]["mimics"] else "outside", effects=(e,))
             for e in ("torque_sensor_lowpass", "slip_power_fade", "run_friction_level",
-                      "torque_ripple", "pressure_temperature_cross")]
+                      "torque_ripple", "pressure_temperature_cross", "actuator_rate_limit")]
     return {c.name: c for c in out}
 
 

@@ -85,6 +85,16 @@ FAST = [
     # dissipated so far fitted the two runs' levels, was named `discovered` (t = 26) and failed
     # on the unseen bags (-25 %) until an extension in the energy alone needed a whole run held out
     ("car", "run_friction_level", 2),
+    # a slew-rate-limited actuator (43 kN/s): only the held-out run has force steps fast enough
+    # for the limit to bite (held-out RMSE 28 N*m, the training runs at the noise's 8), so
+    # nothing fitted on the training runs predicts it; it read `none` until one held-out run
+    # was set against the training runs' spread (held_out_excess_test) -> unexplained
+    ("lab", "actuator_rate_limit", 1),
+    # the slip changes sign while slipping: a model given the sampled slip times each flip of
+    # the friction torque only to a slip sample, and with those rows compared a drag of
+    # 0.63 N*m/(rad/s) was named beside an 18 % hysteresis (a wrong second cause) until the
+    # rows around each zero crossing were left out (lockup.LockupResult.crossings)
+    ("sign_changes", "actuator_hysteresis", 1),
 ]
 SLOW = [
     ("held", "none", 41),
@@ -173,7 +183,12 @@ NEVER_WRONG = [
     # to be wider than twice its noise
     pytest.param("car", "transport_delay+drag_torque", 1,
                  {"transport_delay": 0.05970713754093431, "drag_torque": 3.345556926785983},
-                 marks=pytest.mark.slow, id="car-transport_delay+drag_torque"),
+                 marks=pytest.mark.slow, id="car-transport_delay+drag_torque"),    # a slew-rate-limited actuator (43 kN/s) on the car, outside the catalog: an 11 ms transport
+    # delay (t = 5.4) was named, better on 2 of 4 held-out spans and worse on the others, with a
+    # fade found on top; on the unseen run it made the model worse (7.8 -> 15.2 N*m) until a
+    # cause's gain over its twin had to hold on most held-out pieces
+    pytest.param("car", "actuator_rate_limit", 1, {"actuator_rate_limit": 43229.06250592479},
+                 marks=pytest.mark.slow, id="car-actuator_rate_limit"),
 ]
 
 

@@ -89,6 +89,35 @@ def test_no_lock_where_there_is_none(tmp_path_factory):
     assert not detect_lockup(t, w).mask.any()
 
 
+def test_zero_crossings_of_a_slipping_clutch_are_found_and_left_out():
+    """A slip crossing zero while slipping is no lock, but the samples around each crossing are
+    rows the model is not compared on (the torque flips sign there within ms; the sampled slip
+    times the flip only to a sample): each true crossing lies in one found span, a few slip
+    samples wide; none is found where the slip keeps its sign or inside a lock phase."""
+    rng = np.random.default_rng(3)
+    t = np.arange(0, 20, 0.008)                                   # slip at 125 Hz
+    true = 5 * np.sin(2 * np.pi * 0.25 * t)                        # crossings every 2 s
+    w = true + rng.normal(0, 0.06, t.size)
+    det = detect_lockup(t, w)
+    assert not det.mask.any()
+    t_cross = np.arange(2.0, 20.0, 2.0)
+    assert len(det.crossings) >= t_cross.size
+    for tc in t_cross:
+        near = [c for c in det.crossings if c[0] - 0.03 <= tc <= c[1] + 0.03]
+        assert near, tc
+    assert all(any(abs(0.5 * (a + b) - tc) < 0.05 for tc in t_cross) for a, b in det.crossings)
+    # only the samples around the flip, whatever the lock pad
+    excluded = det.excluded_at(t, pad_s=0.2)
+    assert excluded[np.abs(t - 4.0) < 0.005].all()
+    assert not excluded[(np.abs(t - 4.0) > 0.04) & (np.abs(t - 4.0) < 0.9)].any()
+    # one sign throughout, or noise around 0 inside a lock: no crossing outside the locks
+    assert detect_lockup(t, 3 + np.abs(true) + rng.normal(0, 0.06, t.size)).crossings == []
+    locked = np.where((t > 8) & (t < 11), 0.0, 3 + np.abs(true)) + rng.normal(0, 0.06, t.size)
+    det = detect_lockup(t, locked)
+    assert det.segments and det.crossings == []
+    assert det.excluded_at(t).sum() == det.at(t).sum()
+
+
 def test_interpolate_on_grid():
     tg = np.array([0.0, 0.1, 0.25, 0.3])
     y = 3 * tg + 1
