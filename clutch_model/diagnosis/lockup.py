@@ -130,16 +130,27 @@ def detect_lockup(t_s, slip_rad_s, smooth_s: float = 0.05, min_dwell_s: float = 
     full = np.zeros(ok.size, bool)
     full[np.flatnonzero(ok)] = mask
     return LockupResult(full, segs, float(sigma), float(t_in), float(t_out),
-                        crossings=_zero_crossings(t, uniform_filter1d(w, m, mode="nearest"), mask))
+                        crossings=_zero_crossings(t, uniform_filter1d(w, m, mode="nearest"), mask, sigma, m))
 
 
-def _zero_crossings(t, smoothed, locked) -> list:
-    """[(t_i-1, t_i+2)] where the smoothed signed slip changes sign between samples i and i+1
-    outside a lock phase: the two samples that bracket the crossing, widened by one sample on
-    each side (the raw slip's noise may put its own crossing a sample away)."""
+MAX_CROSSING_S = 0.25     # a crossing's window on each side at most (a slower one dwells: a lock)
+
+
+def _zero_crossings(t, smoothed, locked, sigma: float, half: int) -> list:
+    """[(t0, t1)] around each sign change of the smoothed signed slip between samples i and
+    i+1 outside a lock phase: the two bracketing samples, widened on each side by one sample
+    and by the crossing's timing uncertainty, 3 noise sds over the slip's slope there (a slow
+    crossing is timed less well than a fast one; the slope from the smoothed slip ``half``
+    samples on either side)."""
     flip = np.flatnonzero((np.sign(smoothed[:-1]) * np.sign(smoothed[1:]) < 0) & ~locked[:-1] & ~locked[1:])
     n = t.size
-    return [(float(t[max(i - 1, 0)]), float(t[min(i + 2, n - 1)])) for i in flip]
+    out = []
+    for i in flip:
+        a, b = max(i - half, 0), min(i + 1 + half, n - 1)
+        slope = abs(smoothed[b] - smoothed[a]) / max(t[b] - t[a], 1e-9)
+        widen = min(3.0 * sigma / slope, MAX_CROSSING_S) if slope > 0 else MAX_CROSSING_S
+        out.append((float(t[max(i - 1, 0)] - widen), float(t[min(i + 2, n - 1)] + widen)))
+    return out
 
 
 def detect_lockup_run(run, **options) -> LockupResult:
