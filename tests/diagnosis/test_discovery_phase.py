@@ -62,3 +62,31 @@ def test_discovery_checks_both_reasons_spans_cannot_check():
     assert spans_cannot_check({"mu:energy": 1.86}, spans) == energy_unchecked({"mu:energy": 1.86}, spans) != ""
     assert spans_cannot_check({"mu:pressure*pack_temperature": 2e-3}, spans) == ""
     assert spans_cannot_check(RIPPLE, True) == spans_cannot_check({"mu:energy": 1.86}, True) == ""
+
+
+def test_a_ripple_phase_that_differs_from_run_to_run_does_not_carry():
+    """One held-out run may share a ripple's phase with a fitted run by chance; the fitted runs
+    must each be predicted by the once-per-revolution columns fitted on the others. A ripple
+    whose phase is the same in every run carries; one whose phase is drawn per run does not
+    (seeds 0-4, five fitted runs of 10 s under white noise); terms without the slip angle are
+    not checked."""
+    from clutch_model.diagnosis.engine import phase_differs_between_runs
+    from clutch_model.diagnosis.selection import SelectionData
+
+    from .synthetic_residuals import make_inputs, make_noise
+
+    terms = {"mu:cos_slip_angle": 0.05, "mu:sin_slip_angle": 0.0}
+    for seed in range(5):
+        d = make_inputs(seed, n_runs=6, duration_s=10.0)
+        run = np.cumsum(d["run_start"]) - 1
+        tq = d["torque"] / np.std(d["torque"])
+        X = np.column_stack([np.sin(d["angle"]), np.cos(d["angle"]), tq * np.sin(d["angle"]), tq * np.cos(d["angle"])])
+        data = SelectionData(y=np.zeros(run.size), t=d["t"], run_start=d["run_start"], train_mask=run != 1,
+                             test_mask=run == 1, per_run_features=X)
+        noise = make_noise("white", d["run_start"], 8.0, 100 + seed)
+        common = 0.05 * d["torque"] * np.cos(d["angle"] + 1.0)
+        phases = np.array([0.0, 0.1, 2.2, 4.0, 1.2, 5.1])[run] + seed
+        per_run = 0.05 * d["torque"] * np.cos(d["angle"] + phases)
+        assert phase_differs_between_runs(data, noise + common, terms) == "", seed
+        assert "does not carry" in phase_differs_between_runs(data, noise + per_run, terms), seed
+        assert phase_differs_between_runs(data, noise + per_run, {"mu:slip_power": -0.01}) == ""
