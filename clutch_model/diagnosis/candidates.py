@@ -128,6 +128,12 @@ class ModelFit:
                     yield mech_id, par
 
     @property
+    def time_parameter_names(self) -> tuple:
+        """Names of this fit's parameters in seconds (selection widens their intervals by the
+        rows' timing resolution)."""
+        return tuple(par.name for _, par in self._time_parameters())
+
+    @property
     def below_resolution(self) -> str | None:
         """Why this fit cannot name its mechanism, or None. A time parameter (unit s: a lag, a
         delay) shorter than half the comparison rows' interval is below the data's time

@@ -462,9 +462,19 @@ def test_cause_named_before_the_second_one_meets_its_rivals_again(seed):
 
 
 def test_interval_that_does_not_pin_the_parameter_down():
-    """A named cause's 95 % interval holding 0 or spanning more than a factor of 100 is no
-    name (the two wrong names of the stop-20 matrix had [3e-10, 977] and [0.013, 8.2])."""
+    """A named cause's 95 % interval holding 0 or spanning more than a factor of 10 is no
+    name (the two wrong names of the stop-20 matrix had [3e-10, 977] and [0.013, 8.2]; a
+    degradation read into friction levels drawn per run had [2.3e5, 6.8e6] J); a time
+    parameter is judged on its interval widened by half a row, as the report gives it (a
+    1.1 ms lag [0.9, 3.8] ms on 2 ms rows was named and reported [0, 4.8] ms)."""
     from clutch_model.diagnosis.selection import _unidentified
+
+    assert _unidentified({"energy_scale_j": [2.29e5, 6.81e6]})
+    assert not _unidentified({"energy_scale_j": [5.6e5, 1.58e6]})           # a factor 2.8: right names
+    assert not _unidentified({"tau_s": [0.0009, 0.0038]})
+    assert _unidentified({"tau_s": [0.0009, 0.0038]}, ("tau_s",), 0.001)
+    assert not _unidentified({"tau_s": [0.0189, 0.0499]}, ("tau_s",), 0.01)
+    assert not _unidentified({"ratio": [0.0001, 0.0008]}, ("tau_s",), 0.01)  # not a time parameter
 
     assert _unidentified({"ratio": [3.4e-10, 977.0]})
     assert _unidentified({"offset_nm": [0.0125, 8.22]})
