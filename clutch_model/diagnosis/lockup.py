@@ -26,7 +26,8 @@ noise): a model given the measured slip puts the flip a few ms early or late and
 2T on the torque samples in between (measured on short runs with sign changes, slip at
 124 Hz, the torque at 220 Hz: the true model itself was 1000-2000 N*m off on one or two rows
 per crossing, RMS 35-62 N*m over such runs against 12.8 N*m of noise, hiding an 8 %
-hysteresis). So the slip samples that bracket a crossing (one more on each side) span rows the
+hysteresis). So the slip samples that bracket a crossing (one more on each side), widened by
+the crossing's timing uncertainty (3 noise sds over the slip's slope there), span rows the
 clutch model is not compared on (``excluded_at``). Only those: with 0.2 s on each side, as a
 lock is padded, the sensor's smear of the flip was lost as evidence and a 32 ms torque-sensor
 lag on the virtual car's sign_changes condition was named actuator_lag.
@@ -61,7 +62,7 @@ class LockupResult:
 
     def excluded_at(self, t_query, pad_s: float = 0.0) -> np.ndarray:
         """The rows the clutch model is not compared on: ``at`` (the lock phases, widened by
-        ``pad_s``) and the slip's zero crossings (their bracketing slip samples, not widened:
+        ``pad_s``) and the slip's zero crossings (their own windows, not widened by ``pad_s``:
         away from the flip's uncertain instant a model with the right measurement dynamics
         follows the flipped torque, and the sensor's smear of it is evidence for them)."""
         t_query = np.asarray(t_query, float)

@@ -619,7 +619,8 @@ def holds_on_most_pieces(pieces: list) -> bool:
     pieces (2 of 2). A lookalike that fits part of an effect outside the catalog is not:
     actuator_rate_limit@car#1 (a slew-rate-limited actuator) named an 11 ms transport_delay
     at t = 5.4, better on 2 of the 4 pieces and worse on the others (11.7 against 10.2 N*m),
-    and it made the unseen run worse (7.8 -> 14.3 N*m)."""
+    and the extended model (a fade found on top of it) made the unseen run worse
+    (7.8 -> 15.2 N*m)."""
     if len(pieces) < 2:
         return True
     better = sum(1 for with_, twin in pieces if with_ < twin)
