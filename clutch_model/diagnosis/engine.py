@@ -40,7 +40,7 @@ from clutch_model.diagnosis.lockup import without_locked_torque
 from clutch_model.diagnosis.fitting import CANDIDATE_IDS, CandidateFit, fit_candidate
 from clutch_model.diagnosis.noise_model import fit_noise_model, white_floor
 from clutch_model.diagnosis.selection import (Selection, SelectionData, leaves_of, refit_chain, residual,
-                                               rival_of_extension, select_causes)
+                                               rival_of_extension, select_causes, timing_widened)
 from clutch_model.diagnosis.split import Split, choose_split
 from clutch_model.diagnosis import sample as S
 from clutch_model.diagnosis.sample import DEFAULT_BUDGET_S
@@ -344,8 +344,8 @@ def with_timing_resolution(causes: list, half_row_s: float) -> list:
             lo, hi = float(lohi[0]), float(lohi[1])
             if not (math.isfinite(lo) and math.isfinite(hi)):
                 continue
-            if units.get(k) == "s" and half_row_s > 0:
-                lo, hi = max(lo - half_row_s, 0.0), hi + half_row_s
+            if units.get(k) == "s":
+                lo, hi = timing_widened(lo, hi, half_row_s)
             ci[k] = [min(lo, float(v)), max(hi, float(v))]
         c["parameters_ci95"] = ci
     return causes

@@ -54,26 +54,27 @@ class LockupResult:
     def at(self, t_query, pad_s: float = 0.0) -> np.ndarray:
         """Boolean mask at other times (grid rows, torque stamps): inside a lock phase,
         widened by ``pad_s`` on both sides."""
-        t_query = np.asarray(t_query, float)
-        out = np.zeros(t_query.size, bool)
-        for a, b in self.segments:
-            out |= (t_query >= a - pad_s) & (t_query <= b + pad_s)
-        return out
+        return _inside(t_query, self.segments, pad_s)
 
     def excluded_at(self, t_query, pad_s: float = 0.0) -> np.ndarray:
         """The rows the clutch model is not compared on: ``at`` (the lock phases, widened by
         ``pad_s``) and the slip's zero crossings (their own windows, not widened by ``pad_s``:
         away from the flip's uncertain instant a model with the right measurement dynamics
         follows the flipped torque, and the sensor's smear of it is evidence for them)."""
-        t_query = np.asarray(t_query, float)
-        out = self.at(t_query, pad_s)
-        for a, b in self.crossings:
-            out |= (t_query >= a) & (t_query <= b)
-        return out
+        return self.at(t_query, pad_s) | _inside(t_query, self.crossings)
 
     @property
     def locked_time_s(self) -> float:
         return float(sum(b - a for a, b in self.segments))
+
+
+def _inside(t_query, spans, pad_s: float = 0.0) -> np.ndarray:
+    """Boolean mask of ``t_query`` inside any (a, b) of ``spans``, each widened by ``pad_s``."""
+    t_query = np.asarray(t_query, float)
+    out = np.zeros(t_query.size, bool)
+    for a, b in spans:
+        out |= (t_query >= a - pad_s) & (t_query <= b + pad_s)
+    return out
 
 
 def _spans(mask):

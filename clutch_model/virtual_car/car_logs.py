@@ -769,9 +769,9 @@ def measurement_tail_s(spec: "CarLogSpec") -> float:
 
 def near_true_lock(sidecar: dict, t_s, lock_pad_s: float = 0.1, tail_s: float = 0.0) -> np.ndarray:
     """Times (s from the bag's first message) where the noise-free sensor reading is set by the
-    driveline, not the clutch, or not timed by the sampled inputs: inside a true lock phase widened by ``lock_pad_s`` on both sides
-    and by ``tail_s`` more after it (``measurement_tail_s``: the sensor shows the lock's torque
-    that much later); and around each zero crossing of the true slip (the friction torque flips
+    driveline, not the clutch, or not timed by the sampled inputs: inside a true lock phase
+    widened by ``lock_pad_s`` on both sides and by ``tail_s`` more after it
+    (``measurement_tail_s``: the sensor shows the lock's torque that much later); and around each zero crossing of the true slip (the friction torque flips
     sign there, and a replay that holds the latest slip sample times the flip only to a slip
     sample)."""
     t_s = np.asarray(t_s, float)
