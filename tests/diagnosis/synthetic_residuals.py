@@ -100,6 +100,34 @@ def make_noise(kind: str, run_start: np.ndarray, sigma: float, seed: int, rate_h
     return out
 
 
+def ou_drift_noise(run_start: np.ndarray, sigma: float, seed: int, rate_hz: float = 200.0,
+                   tau_s: float = 36.0, drift_share: float = 0.6) -> np.ndarray:
+    """White noise plus a slow Ornstein-Uhlenbeck drift (time constant tau_s, independent
+    between runs; drift_share of the standard deviation sigma), each run started in the
+    drift's stationary distribution."""
+    rng = np.random.default_rng(seed)
+    phi = np.exp(-1.0 / (tau_s * rate_hz))
+    starts = np.flatnonzero(run_start)
+    ends = np.append(starts[1:], run_start.size)
+    out = np.empty(run_start.size)
+    for a, b in zip(starts, ends):
+        drift = lfilter([np.sqrt(1 - phi * phi)], [1.0, -phi], rng.normal(size=b - a),
+                        zi=[phi * rng.normal()])[0]
+        out[a:b] = sigma * (np.sqrt(1 - drift_share ** 2) * rng.normal(size=b - a) + drift_share * drift)
+    return out
+
+
+def split_spans(t: np.ndarray, run_start: np.ndarray, span_s: float = 7.0):
+    """Time spans held out: every third span of span_s seconds of each run, from the second
+    -> (train_mask, test_mask)."""
+    run = np.cumsum(run_start) - 1
+    test = np.zeros(t.size, bool)
+    for r in np.unique(run):
+        sel = run == r
+        test[sel] = (np.floor(t[sel] / span_s).astype(int) % 3) == 1
+    return ~test, test
+
+
 def feature_signals(d: dict) -> dict:
     """The inputs a flexible residual model may use."""
     return {"force": d["force"], "slip": np.abs(d["slip"]), "pack_temperature": d["pack_temperature"],

@@ -95,3 +95,33 @@ def test_time_parameters_carry_the_grid_timing_resolution():
     assert causes[0]["parameters_ci95"]["delay_s"] == pytest.approx([0.2952, 0.3005])
     assert causes[1]["parameters_ci95"]["coeff_nm_per_rad_s"] == pytest.approx([1.9, 2.1])   # not a time
     assert causes[2]["parameters_ci95"]["coeff_nm_per_rad_s"] == pytest.approx([2.0, 2.3])   # holds the value
+
+
+def test_tail_covers_every_candidate_that_predicts_the_held_out_data():
+    """Candidates are compared on the same rows: a torque-sensor lag that predicts the held-out
+    data better than the noise model asks for its tail even when another cause is named (a
+    0.1 s sensor lag lost to actuator_lag while the rows its tail spoils were compared), and a
+    candidate that does not predict it asks for nothing."""
+    from types import SimpleNamespace as NS
+
+    from clutch_model.diagnosis.engine import _lock_tail_of
+
+    def score(cid, significant, **params):
+        return NS(id=cid, significant=significant, fitted=NS(parameters=params))
+
+    scores = [score("actuator_lag", True, tau_s=0.1), score("torque_sensor_lag", True, tau_s=0.09),
+              score("transport_delay", False, delay_s=0.5)]
+    named = NS(causes=[{"id": "actuator_lag", "parameters": {"tau_s": 0.1}}], cause_id="actuator_lag",
+               scores=scores, selection=NS(closest=[]))
+    assert _lock_tail_of(named) == pytest.approx(3 * 0.09)
+    # a named delay asks for more than the runner-up's lag: the longest wins
+    delay = {"id": "transport_delay", "parameters": {"delay_s": 0.3}, "parameters_ci95": {"delay_s": [0.29, 0.31]}}
+    assert _lock_tail_of(NS(causes=[delay], cause_id="transport_delay", scores=scores,
+                            selection=NS(closest=[]))) == pytest.approx(0.31)
+    # nothing significant, nothing named: no tail
+    quiet = [score("torque_sensor_lag", False, tau_s=0.2), score("transport_delay", False, delay_s=0.3)]
+    assert _lock_tail_of(NS(causes=[], cause_id="none", scores=quiet, selection=NS(closest=[]))) == 0.0
+    # unexplained between lookalikes: the closest candidates' tails, significant or not
+    assert _lock_tail_of(NS(causes=[], cause_id="unexplained", scores=quiet,
+                            selection=NS(closest=["transport_delay"]))) == pytest.approx(0.3)
+    assert _lock_tail_of(NS(causes=[], cause_id="none", scores=quiet, selection=None)) == 0.0
