@@ -634,12 +634,16 @@ def _refit_terms(chosen, column, sig, sim, fit_rows, anchor, campaign, sigma, sa
                    unseen_prior=unseen_range_prior(sim, campaign.slip, fit_rows, sigma))
     lo, hi = refit.bounds()
     x0 = np.clip(refit.start(a_lin), lo, hi)
-    sol = least_squares(refit.residuals, x0, jac=refit.jacobian, bounds=(lo, hi), method="trf",
-                        x_scale="jac", max_nfev=REFIT_NFEV, xtol=1e-8, ftol=1e-8)
-    x = sol.x
-    coefs = refit.coefficients(x)
-    terms = refit.terms_at(x)
-    half, half_log_tau = _ci95(refit, x, campaign)
+    # a trial step may drive the simulation out of range: its residuals overflow to inf and the
+    # trust region rejects the step; a direction the rows do not resolve gets an infinite
+    # interval (no name). Neither is worth a RuntimeWarning on the user's console.
+    with np.errstate(over="ignore", invalid="ignore"):
+        sol = least_squares(refit.residuals, x0, jac=refit.jacobian, bounds=(lo, hi), method="trf",
+                            x_scale="jac", max_nfev=REFIT_NFEV, xtol=1e-8, ftol=1e-8)
+        x = sol.x
+        coefs = refit.coefficients(x)
+        terms = refit.terms_at(x)
+        half, half_log_tau = _ci95(refit, x, campaign)
     tau_ci = {terms[i].id: [float(terms[i].tau_s * math.exp(-h)), float(terms[i].tau_s * math.exp(h))]
               for i, h in zip(refit.lagged, half_log_tau)}
     return {"terms": terms, "coefficients": coefs, "model": refit.model_at(x), "predicted": refit.predict([x])[0],
