@@ -101,6 +101,10 @@ CONDITIONS = {c.name: c for c in (
               torque_noise=("median", {"window": 5})),
     Condition("drift", "white torque noise plus a slow drift (OU, 4 N·m, 10 s)", "coloured-noise",
               torque_noise=("drift", {"drift": 4.0, "tau_s": 10.0})),
+    Condition("slow_drift", "white torque noise plus a slow drift (OU, 5 N·m, 36 s; a sensor warming up) "
+                            "over few long runs, time spans held out", "coloured-noise",
+              torque_noise=("drift", {"drift": 5.0, "tau_s": 36.0}), schedule="few-long",
+              size=(3, 1, 40.0), quick_size=(2, 1, 30.0)),
     Condition("lockup", "lock-up phases: slip exactly 0, the driveline sets the torque", "lockup",
               lockup=True),
     Condition("sign_changes", "the slip changes sign while slipping (crossing 0 in ~0.1 s), topics on "
