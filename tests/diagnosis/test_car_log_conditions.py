@@ -49,6 +49,7 @@ FAST = [
     # "structure" after the lag (t = 6.2, `unexplained`) until the plain remainder fit's noise
     # model came from its cross-fitted residual and had to beat the null's own noise model too
     ("slow_drift", "actuator_lag", 1),
+    ("slow_drift", "none", 1),                       # the same slow drift alone read `unexplained`
     # a 70 ms actuator lag under AR(1) 0.95 noise: torque_sensor_lag leads on the gain but loses
     # head to head (p = 0.0002); without the head-to-head rule this read `unexplained`
     ("ar1", "actuator_lag", 1),
