@@ -339,31 +339,24 @@ def _ridge_gcv(Xw: np.ndarray, yw: np.ndarray, lambdas=None):
     return beta, lam
 
 
-def _ridge_grouped_cv(Xw: np.ndarray, yw: np.ndarray, groups: np.ndarray, lambdas=None):
+def _ridge_grouped_cv(Xw: np.ndarray, yw: np.ndarray, groups: np.ndarray, lambdas=None, grams=None):
     """Ridge penalty by grouped cross-validation (leave one group of rows out: a run, or a
     contiguous chunk of a long run), from per-group Gram matrices: the flexible model must
     predict runs it was not fitted on, so a library column that only extrapolates (a slip^2
-    fitted inside the fit runs' range) is shrunk rather than trusted."""
+    fitted inside the fit runs' range) is shrunk rather than trusted. ``grams``: the groups'
+    ``_group_grams``, when already computed."""
     k = Xw.shape[1]
-    uniq = np.unique(groups)
-    if uniq.size < 3:
+    if np.unique(groups).size < 3:
         return _ridge_gcv(Xw, yw, lambdas)
-    G = np.zeros((uniq.size, k, k))
-    h = np.zeros((uniq.size, k))
-    yy = np.zeros(uniq.size)
-    for j, g in enumerate(uniq):
-        sel = groups == g
-        A = Xw[sel]
-        G[j] = A.T @ A
-        h[j] = A.T @ yw[sel]
-        yy[j] = float(yw[sel] @ yw[sel])
+    sels, G, h = grams or _group_grams(Xw, yw, groups)
+    yy = np.array([float(yw[sel] @ yw[sel]) for sel in sels])
     Gt, ht = G.sum(axis=0), h.sum(axis=0)
     scale = float(np.trace(Gt)) / k
     lambdas = lambdas if lambdas is not None else scale * np.geomspace(1e-7, 10.0, 17)
     best = None
     for lam in lambdas:
         err = 0.0
-        for j in range(uniq.size):
+        for j in range(len(sels)):
             beta = np.linalg.solve(Gt - G[j] + lam * np.eye(k), ht - h[j])
             err += yy[j] - 2 * beta @ h[j] + beta @ G[j] @ beta
         if best is None or err < best[0]:
@@ -372,15 +365,21 @@ def _ridge_grouped_cv(Xw: np.ndarray, yw: np.ndarray, groups: np.ndarray, lambda
     return np.linalg.solve(Gt + lam * np.eye(k), ht), lam
 
 
-def _out_of_fold(Xw: np.ndarray, yw: np.ndarray, groups: np.ndarray, lam: float) -> np.ndarray:
-    """Each group's prediction by the ridge (penalty lam) fitted on the other groups."""
-    k = Xw.shape[1]
-    uniq = np.unique(groups)
-    sels = [groups == g for g in uniq]
+def _group_grams(Xw: np.ndarray, yw: np.ndarray, groups: np.ndarray) -> tuple:
+    """Per group of rows: (row masks, Gram matrices X'X, X'y)."""
+    sels = [groups == g for g in np.unique(groups)]
     G = np.stack([Xw[sel].T @ Xw[sel] for sel in sels])
     h = np.stack([Xw[sel].T @ yw[sel] for sel in sels])
+    return sels, G, h
+
+
+def _out_of_fold(Xw: np.ndarray, grams: tuple, lam: float) -> np.ndarray:
+    """Each group's prediction by the ridge (penalty lam) fitted on the other groups
+    (``grams``: their ``_group_grams``)."""
+    k = Xw.shape[1]
+    sels, G, h = grams
     Gt, ht = G.sum(axis=0), h.sum(axis=0)
-    out = np.zeros(yw.size)
+    out = np.zeros(Xw.shape[0])
     for j, sel in enumerate(sels):
         out[sel] = Xw[sel] @ np.linalg.solve(Gt - G[j] + lam * np.eye(k), ht - h[j])
     return out
@@ -441,11 +440,12 @@ def fit_flexible_ols(residual: np.ndarray, X: np.ndarray, train_mask: np.ndarray
     r, X, ok, Xs, scale = _standardised(residual, X, train_mask)
     rows = np.flatnonzero(ok)
     groups = _cv_groups(rows, run_start)
-    beta, lam = _ridge_grouped_cv(Xs[rows], r[rows], groups)
+    grams = _group_grams(Xs[rows], r[rows], groups)
+    beta, lam = _ridge_grouped_cv(Xs[rows], r[rows], groups, grams=grams)
     pred = np.where(np.all(np.isfinite(X), axis=1), Xs @ beta, 0.0)
     cross_fitted = pred.copy()
-    if np.unique(groups).size >= 2:
-        cross_fitted[rows] = _out_of_fold(Xs[rows], r[rows], groups, lam)
+    if len(grams[0]) >= 2:
+        cross_fitted[rows] = _out_of_fold(Xs[rows], grams, lam)
     return beta / scale, pred, cross_fitted
 
 

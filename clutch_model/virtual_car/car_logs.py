@@ -771,9 +771,9 @@ def near_true_lock(sidecar: dict, t_s, lock_pad_s: float = 0.1, tail_s: float = 
     """Times (s from the bag's first message) where the noise-free sensor reading is set by the
     driveline, not the clutch, or not timed by the sampled inputs: inside a true lock phase
     widened by ``lock_pad_s`` on both sides and by ``tail_s`` more after it
-    (``measurement_tail_s``: the sensor shows the lock's torque that much later); and around each zero crossing of the true slip (the friction torque flips
-    sign there, and a replay that holds the latest slip sample times the flip only to a slip
-    sample)."""
+    (``measurement_tail_s``: the sensor shows the lock's torque that much later); and around
+    each zero crossing of the true slip (the friction torque flips sign there, and a replay
+    that holds the latest slip sample times the flip only to a slip sample)."""
     t_s = np.asarray(t_s, float)
     ft, fl = sidecar["fine_t_s"], sidecar["fine_locked"].astype(float)
     slip = sidecar.get("fine_slip_speed_rad_s")
