@@ -240,17 +240,21 @@ def test_measured_time_campaign(short_campaign):
     model = load_model(paths["truth_model"])
     rep = replay_runs(model, camp)
     mts = simulate_at_measured_times(model, runs, rate_hz=1000.0)
+    replay_rows = np.zeros(camp.t.size, bool)
     for run, (new, sl) in zip(runs, camp.slices()):
         ok = np.isfinite(new.torque_measured_nm)
-        # measured samples sit at their own stamps, nothing else is measured
+        # measured samples sit at their own stamps, nothing else is measured; the grid starts
+        # at the first force and slip sample, the replay grid's first row or before it
+        assert new.t[0] <= run.t[0]
         np.testing.assert_array_equal(new.t[ok], run.torque_measured_t[run.torque_measured_t >= new.t[0]])
-        assert ok.sum() == np.isfinite(new.torque_measured_nm).sum()
+        replay_rows[sl] = new.t >= run.t[0]
     # the grid-based replay on it agrees with the 1 kHz measured-time simulation at the stamps
-    ok = np.isfinite(camp.torque_measured)
+    # (which starts at the replay grid's first row; the film's start differs over a few rows)
+    ok = np.isfinite(camp.torque_measured) & replay_rows
     a = rep.torque_sim[ok]
     b = mts.comparison.model[mts.comparison.valid]
-    lock = np.concatenate([detect_lockup_run(r).at(r.torque_measured_t[r.torque_measured_t >= n.t[0]], 0.1)
-                           for r, n in zip(runs, camp.runs)])
+    lock = np.concatenate([detect_lockup_run(r).at(r.torque_measured_t[r.torque_measured_t >= r.t[0]], 0.1)
+                           for r in runs])
     assert a.size == b.size
     assert np.sqrt(np.mean((a - b)[~lock] ** 2)) < 3.0
 
@@ -273,3 +277,43 @@ def test_lock_detection_with_slip_sign_changes(tmp_path_factory):
     assert crossings >= 2
     prec, rec, n = precision_recall(paths, runs)
     assert prec >= 0.85 and rec >= 0.95, (prec, rec)
+
+
+def test_plant_starts_where_force_and_slip_start(tmp_path):
+    """A sump temperature logged at 2 Hz starts 0.45 s after the force and slip: the replay grid
+    starts there, with the film at rest although 400 N have squeezed it since the start. The
+    diagnosis's grid starts at the first instant with a force and a slip sample (the sump's first
+    sample held back), so the model follows the true torque from there; independent truth: the
+    plant simulated from the log's start on a fine grid with the noise-free inputs."""
+    from clutch_model.diagnosis.measured_time import measured_time_campaign, plant_inputs_start_s
+    from clutch_model.formats.bag_reader import read_bag
+    from clutch_model.formats.bag_writer import write_run_bag
+    from clutch_model.replay import replay_runs
+    model = load_model(None)
+    fine = np.arange(0.0, 2.5, 1e-4)
+    force = lambda t: np.where(t < 1.2, 400.0, 400.0 + 3000.0 * np.minimum((t - 1.2) / 0.3, 1.0))
+    slip = lambda t: 8.0 + 2.0 * np.sin(2 * np.pi * 0.5 * t)
+    truth = simulate(model, fine, force(fine), slip(fine), 60.0).torque_nm
+    tf, tw = np.arange(0.002, 2.45, 0.002), np.arange(0.004, 2.45, 0.005)
+    tq, ts = np.arange(0.0035, 2.45, 0.005), np.arange(0.45, 2.45, 0.5)
+    write_run_bag(tmp_path / "b", {"applied_force": (tf, force(tf)), "slip_speed": (tw, slip(tw)),
+                                   "sump_temperature": (ts, np.full(ts.size, 60.0)),
+                                   "measured_torque": (tq, np.interp(tq, fine, truth))})
+    run = read_bag(tmp_path / "b")
+    t_bag = run.samples["applied_force"][0][0] - 0.002           # the bag's time base
+    assert run.t[0] - t_bag >= 0.45 - 1e-9                       # the replay grid waits for the sump
+    camp = measured_time_campaign([run])
+    assert abs(camp.t[0] - plant_inputs_start_s(run)) < 1e-12
+    assert abs(camp.t[0] - t_bag - 0.004) < 1e-6                 # the first slip sample
+    resid = camp.torque_measured - replay_runs(model, camp).torque_sim
+    ok = np.isfinite(resid)
+    assert np.count_nonzero(ok & (camp.t < run.t[0])) >= 85       # the torque before the sump is compared
+    late = replay_runs(model, [run])                              # from the replay grid's first row
+    tt = run.torque_measured_t
+    at = (tt >= run.t[0]) & (tt < run.t[0] + 0.75)
+    err_late = np.interp(tt[at], run.t, late.torque_sim) - run.torque_measured_raw_nm[at]
+    early = ok & (camp.t >= run.t[0]) & (camp.t < run.t[0] + 0.75)
+    rms_late, rms_early = np.sqrt(np.mean(err_late ** 2)), np.sqrt(np.mean(resid[early] ** 2))
+    scale = np.sqrt(np.mean(truth[(fine > 0.45) & (fine < 1.2)] ** 2))
+    assert rms_late > 0.05 * scale, (rms_late, scale)            # the missed squeeze shows
+    assert rms_early < 0.2 * rms_late, (rms_early, rms_late)
