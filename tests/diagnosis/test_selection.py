@@ -405,6 +405,12 @@ def test_time_parameter_below_the_rows_resolution_is_not_named():
     assert fit("transport_delay", delay_s=0.002).below_resolution
     assert fit("actuator_lag", tau_s=0.003).below_resolution is None
     assert fit("spring_preload", preload_n=1.0).below_resolution is None
+    # with the slip driving the plant smoothed (5 ms Gaussian), the inputs' scale is the limit
+    ctx.slip_smoothing_s = 0.005
+    assert "slip is smoothed" in fit("torque_sensor_lag", tau_s=0.004).below_resolution
+    assert "slip is smoothed" in fit("transport_delay", delay_s=0.0045).below_resolution
+    assert fit("torque_sensor_lag", tau_s=0.02).below_resolution is None     # the catalog's visible range
+    assert fit("spring_preload", preload_n=1.0).below_resolution is None
 
 
 @pytest.mark.parametrize("noise_n", [5.0, 20.0, 60.0])
