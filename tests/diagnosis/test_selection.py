@@ -449,6 +449,44 @@ def test_hysteresis_band_within_the_force_noise_is_not_named(noise_n):
     assert fit("spring_preload", preload_n=1.0).below_resolution is None        # no band on the force
 
 
+def test_offset_within_the_residuals_slow_wander_is_not_named():
+    """A torque offset is told from a slowly drifting sensor only when it stands out of the
+    residual's wander (LEVEL_WANDER_FACTOR x the RMS of its LEVEL_BLOCK_S means): on one 60 s
+    drive with an OU drift of 4.6 N*m (35 s), the offset a fit finds in the drift alone (its mean
+    over the training spans) is refused on each of 8 seeds, a 30 N*m offset is not; under white
+    noise of the same size 2 N*m stands out, under AR(1) 0.95 noise the catalog's smallest offset
+    (10 N*m)."""
+    from types import SimpleNamespace
+
+    from clutch_model.diagnosis.candidates import LEVEL_WANDER_FACTOR, CampaignContext, ModelFit
+    from clutch_model.diagnosis.fitting import CandidateFit
+    from tests.diagnosis.synthetic_residuals import make_noise, ou_drift_noise
+
+    t = np.arange(0, 60, 0.005)
+    run_start = np.zeros(t.size, bool)
+    run_start[0] = True
+    camp = SimpleNamespace(t=t, run_start=run_start)
+    ctx = CampaignContext(camp, 0.0, 100.0, 8.0)
+    train = (np.floor(t / 5.0) % 3) != 1
+
+    def fit(residual, **params):
+        return ModelFit("torque_offset", CandidateFit("torque_offset", None, params, np.zeros(10), 1.0,
+                                                      residual=residual), None, ctx, train)
+
+    for seed in range(8):
+        drift = ou_drift_noise(run_start, 7.0, 40 + seed, tau_s=35.0, drift_share=0.65)
+        level = drift[train].mean()                        # the offset a fit to the drift finds: 1-4.4 N*m
+        assert "slow wander" in fit(drift - level, offset_nm=level).below_resolution, seed
+        wander = fit(drift - level, offset_nm=level).level_wander_nm
+        assert 1.0 < wander < 6.0, wander
+        assert fit(drift - level, offset_nm=1.05 * LEVEL_WANDER_FACTOR * wander).below_resolution is None
+        assert fit(drift, offset_nm=30.0).below_resolution is None      # a true offset on top of the drift
+        for kind, offset in (("white", 2.0), ("ar1_095", 10.0)):
+            noise = make_noise(kind, run_start, 7.0, 50 + seed)
+            assert fit(noise, offset_nm=offset).below_resolution is None, kind
+    assert fit(drift, offset_nm=-30.0).below_resolution is None
+
+
 @pytest.mark.parametrize("seed", [2, 3, 4])
 def test_cause_named_before_the_second_one_meets_its_rivals_again(seed):
     """C = A + 0.4 B + 0.7 D looks best alone when y = A + B (it carries part of B); once B is

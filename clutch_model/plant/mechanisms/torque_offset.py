@@ -8,6 +8,7 @@ class TorqueOffset(Mechanism):
     id = "torque_offset"
     path = "measurement"
     parameters = (Parameter("offset_nm", "N*m", (-1e5, 1e5), "sensor bias"),)
+    torque_level = "offset_nm"
     physics = "torque sensor bias: measured = true + offset"
     virtual_car = VirtualCarRange(visible=(10.0, 50.0), default=25.0)
 
