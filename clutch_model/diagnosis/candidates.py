@@ -163,6 +163,17 @@ class ModelFit:
                         f"model's inputs (the slip is smoothed with a {1e3 * smooth_s:.3g} ms Gaussian)")
         return self._below_force_resolution() or self._below_level_wander()
 
+    def _marked_parameters(self, mark: str):
+        """(mechanism id, parameter name, fitted value) of each of this fit's mechanisms whose
+        class names that parameter under ``mark`` (``force_band``, ``torque_level``)."""
+        if self.id == "baseline":
+            return
+        for mech_id in self.id.split("+"):
+            name = getattr(CATALOG.get(mech_id), mark, None)
+            v = self.fit.parameters.get(name) if name else None
+            if isinstance(v, (int, float)):
+                yield mech_id, name, v
+
     def _below_level_wander(self) -> str | None:
         """A constant torque (a sensor bias) smaller than LEVEL_WANDER_FACTOR times the slow
         wander of what remains is not told from that wander: the RMS of the mean residual over
@@ -174,13 +185,9 @@ class ModelFit:
         (innovation variance -1.4 %); its 2 s means wander by 2.6 N*m. Under white noise of a
         few N*m the block means wander by a fraction of a N*m, under AR(1) 0.95 noise by up to
         3 N*m, and the offsets of the catalog's range (10-50 N*m) stand out."""
-        if self.id == "baseline" or self.fit.residual is None:
+        if self.fit.residual is None:
             return None
-        for mech_id in self.id.split("+"):
-            name = getattr(CATALOG.get(mech_id), "torque_level", None)
-            v = self.fit.parameters.get(name) if name else None
-            if not isinstance(v, (int, float)):
-                continue
+        for mech_id, name, v in self._marked_parameters("torque_level"):
             wander = self.level_wander_nm
             if np.isfinite(wander) and abs(v) < LEVEL_WANDER_FACTOR * wander:
                 return (f"{mech_id} {name} = {v:.3g} N*m is within the slow wander of the residual (its "
@@ -221,13 +228,7 @@ class ModelFit:
         cause on transport_delay+drag_torque@car#1, a first on pressure_temperature_cross@car#1)
         with the plain held-out mean square down only 1.7-2.4 %; the virtual car's hysteresis
         is 0.05-0.2 (bands of 150-600 N)."""
-        if self.id == "baseline":
-            return None
-        for mech_id in self.id.split("+"):
-            band = getattr(CATALOG.get(mech_id), "force_band", None)
-            v = self.fit.parameters.get(band) if band else None
-            if not isinstance(v, (int, float)):
-                continue
+        for mech_id, band, v in self._marked_parameters("force_band"):
             noise, force = self.context.force_noise_n, self.context.typical_force_n
             if np.isfinite(noise) and np.isfinite(force) and v * force < FORCE_BAND_NOISE_FACTOR * noise:
                 return (f"{mech_id} {band} = {v:.2g} is below the force's resolution (a band of "
