@@ -152,7 +152,7 @@ class ModelFit:
         17 Hz, 2.45 ms rows) a 2 ms torque-sensor lag predicted the held-out data at t = 105
         (innovation variance -57 %, plain mean square -4 %)."""
         half_row_s = 0.5 * self.context.row_interval_s
-        smooth_s = float(self.context.slip_smoothing_s or 0.0)
+        smooth_s = self.context.slip_smoothing_s
         for mech_id, par in self._time_parameters():
             v = self.fit.parameters.get(par.name)
             if isinstance(v, (int, float)) and v < half_row_s:

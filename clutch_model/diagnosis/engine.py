@@ -487,7 +487,7 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
     lib_names, lib = residual_library(campaign, sim_cal, calibrated.predicted)
     ctx = CampaignContext(campaign, energy_total, torque_scale, sigma_guess,
                           bench_model if cal_base is not bench_model else None,
-                          slip_smoothing_s=float(inputs.get("sigma_s", 0.0)) if inputs.get("slip_smoothed") else 0.0)
+                          slip_smoothing_s=float(inputs.get("sigma_s", 0.0)))   # 0 unless smoothed
     ids = list(candidates) if candidates else diagnosis_candidate_ids()
     data = SelectionData(y=campaign.torque_measured, t=campaign.t, run_start=campaign.run_start,
                          train_mask=fit_mask & scored, test_mask=eval_mask & scored, features=lib,
