@@ -491,7 +491,7 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
     ids = list(candidates) if candidates else diagnosis_candidate_ids()
     data = SelectionData(y=campaign.torque_measured, t=campaign.t, run_start=campaign.run_start,
                          train_mask=fit_mask & scored, test_mask=eval_mask & scored, features=lib,
-                         feature_names=lib_names, groups=campaign.run_index, model_dynamics=True)
+                         feature_names=lib_names, groups=campaign.run_index)
     data.per_run_feature_names, data.per_run_features = ripple_columns(campaign, calibrated.predicted)
     base = baseline_fit(calibrated, cal_base, ctx, fit_mask & scored)
     cands = [MechanismCandidate(cid, ctx) for cid in ids]

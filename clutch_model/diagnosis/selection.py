@@ -34,7 +34,7 @@ import numpy as np
 from clutch_model.diagnosis.noise_model import DEFAULT_MAX_ORDER, segments_of
 from clutch_model.diagnosis.structure_test import (ALPHA, BLOCK_S, MIN_GAIN_FRAC, PredictiveComparison,
                                                    StructureResult, block_labels, compare_residuals,
-                                                   held_out_excess_test, input_features, per_run_structure_test,
+                                                   held_out_excess_test, per_run_structure_test,
                                                    structure_test)
 from clutch_model.diagnosis.run_level import RunLevelResult, run_level_tests
 
@@ -58,8 +58,6 @@ class SelectionData:
     per_run_feature_names: list = field(default_factory=list)
     groups: np.ndarray | None = None      # jackknife groups of training rows (run index); None: blocks
     payload: object = None                # whatever the candidates need (the campaign, models, ...)
-    model_dynamics: bool = False          # the remainder after named causes also gets the torque-path
-                                          # dynamics columns of the model as it then stands
 
 
 @dataclass
@@ -257,44 +255,14 @@ def _compare(data, resid_null, resid_alt, max_order):
                              max_order=max_order)
 
 
-def model_dynamics_columns(data: SelectionData, resid: np.ndarray) -> tuple:
-    """The library's torque-path dynamics columns (torque low-passed minus itself, at the
-    library's time constants) built from the prediction of the model as it now stands
-    (measured - ``resid``; rows without a measurement interpolated within their run) ->
-    (names, X).
-
-    The library builds them from the calibrated model's torque. Once a delay or a lag is named,
-    its misfit sits at the *shifted* torque edges, which those columns do not see: a
-    second-order actuator at 2.43 Hz under AR(1) 0.956 noise was named a 75 ms transport delay,
-    the remainder after it t = 0.6 with the library (held-out RMSE 19.4 N*m against the
-    noise's 16.8), t = 9.4 with these columns too."""
-    pred = np.asarray(data.y, float) - np.asarray(resid, float)
-    filled = np.zeros(pred.size)
-    for a, b in segments_of(np.zeros(pred.size), data.run_start):
-        seg = pred[a:b]
-        ok = np.isfinite(seg)
-        if ok.any():
-            idx = np.arange(b - a)
-            filled[a:b] = np.interp(idx, idx[ok], seg[ok])
-    names, X = input_features({}, data.t, data.run_start, torque=filled)
-    keep = [k for k, n in enumerate(names) if "low-pass" in n]
-    return [f"named model: {names[k]}" for k in keep], X[:, keep]
-
-
-def _remainder_test(data, resid, alpha, min_gain_frac, max_order, after_named: bool = False):
+def _remainder_test(data, resid, alpha, min_gain_frac, max_order):
     """The flexible residual model, and the per-run one when there are per-run columns (each
-    at alpha / 2); the more significant result is returned. ``after_named``: the residual is
-    what named causes leave (with ``data.model_dynamics``, the library gains the named model's
-    torque-path dynamics, model_dynamics_columns)."""
+    at alpha / 2); the more significant result is returned."""
     if data.features is None:
         return None
     tests = 3 if data.per_run_features is not None else 2
-    X, names = data.features, list(data.feature_names)
-    if after_named and data.model_dynamics:
-        more_names, more = model_dynamics_columns(data, resid)
-        X, names = np.column_stack([X, more]), names + more_names
-    res = structure_test(resid, X, data.train_mask, data.test_mask, data.run_start, data.t,
-                         feature_names=names, alpha=alpha / tests, min_gain_frac=min_gain_frac,
+    res = structure_test(resid, data.features, data.train_mask, data.test_mask, data.run_start, data.t,
+                         feature_names=data.feature_names, alpha=alpha / tests, min_gain_frac=min_gain_frac,
                          max_order=max_order)
     if data.per_run_features is not None:
         per_run = per_run_structure_test(resid, data.per_run_features, data.train_mask, data.test_mask,
@@ -1065,8 +1033,7 @@ def select_causes(data: SelectionData, baseline, candidates: Sequence, alpha: fl
             resid_cur = residual(data, current)
 
     say("structure test of what remains")
-    rem_struct = (_remainder_test(data, resid_cur, alpha, structure_min_gain_frac, max_order, after_named=True)
-                  if named else base_struct)
+    rem_struct = _remainder_test(data, resid_cur, alpha, structure_min_gain_frac, max_order) if named else base_struct
     structured_left = bool(rem_struct is not None and rem_struct.structured)
     named_ids = {c.id for c in named}
     unresolved = sorted({lk for s in steps for lk in s.lookalikes if lk not in named_ids})
