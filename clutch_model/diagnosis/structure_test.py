@@ -522,6 +522,7 @@ def structure_test(residual: np.ndarray, X: np.ndarray, train_mask, test_mask, r
     # the delay, plain held-out mean square -30 %; with the null's own noise model t = 4.3 and
     # innovation variance -0.3 %, below materiality).
     best = None
+    own_null = None      # the null residual's own noise model: fitted once, when a fit needs it
     for fit in ("ols", "gls"):
         if fit == "ols":
             beta, pred, cross_fitted = fit_flexible_ols(residual, X, train_mask, run_start)
@@ -537,9 +538,11 @@ def structure_test(residual: np.ndarray, X: np.ndarray, train_mask, test_mask, r
             structured = cmp.significant(alpha / 2, min_gain_frac, noise_units=True)
         if structured:
             # and with the null residual's own noise model, which forecasts its own drift
+            if own_null is None:
+                own_null = _own_noise(residual, train_mask, run_start, max_order)
             own = compare_residuals(residual, residual - pred, train_mask, test_mask, run_start, t,
                                     block_s=block_s, max_order=max_order, noise_fit_alt=noise_fit_alt,
-                                    noise_null=_own_noise(residual, train_mask, run_start, max_order))
+                                    noise_null=own_null)
             structured = own.significant(alpha / 2, min_gain_frac)
         res = StructureResult(structured=structured, comparison=cmp,
                               coefficients=beta, feature_names=list(feature_names or []), prediction=pred)
