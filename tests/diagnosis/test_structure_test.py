@@ -300,52 +300,45 @@ def test_white_floor_is_the_ar_approximation_of_the_spectrum_plus_white_noise():
     assert fit_noise_model(x).innovation_variance == pytest.approx(nm.innovation_variance, rel=1e-12)
 
 
-def test_slow_drift_over_few_long_runs_is_not_structure():
-    """Two runs of 60 s with held-out time spans, the sensor drifting slowly (OU, 36 s) on top
-    of white noise. Slow library columns (energy, pack temperature) follow a training stretch's
-    drift in sample; the held-out test must not take that for structure the inputs drive. On
-    the plain ridge's in-sample residual the noise model saw almost no drift, and the null
-    residual's drift then passed for a gain (3 of these 8 seeds, t up to 19). Fitting the noise
-    model to the cross-fitted residual alone still left one (t = 13.9); the structure must now
-    also beat the null residual's own noise model. A 3 % torque bias with the slip power,
-    under the same noise, is still found."""
-    flagged = []
-    for seed in range(8):
-        d = make_inputs(seed, n_runs=2, duration_s=60.0, rate_hz=200.0)
-        names, X = input_features(feature_signals(d), d["t"], d["run_start"], torque=d["torque"])
-        train, test = split_spans(d["t"], d["run_start"])
-        noise = ou_drift_noise(d["run_start"], 6.5, 500 + seed)
-        res = structure_test(noise, X, train, test, d["run_start"], d["t"], names, min_gain_frac=0.01)
-        if res.structured:
-            flagged.append((seed, res.comparison.t_stat, res.comparison.gain_frac))
-        if seed < 3:
-            bias = 0.03 * d["torque"] * d["power"] / np.mean(d["power"])
-            found = structure_test(noise + bias, X, train, test, d["run_start"], d["t"], names, min_gain_frac=0.01)
-            assert found.structured, (seed, found.comparison)
-    assert not flagged, flagged
+# (runs, duration s, rate Hz, held-out span s, noise sd N*m, drift tau s, drift share, white floor
+# as a share of the sd, seeds, seeds also checked with the bias)
+SLOW_DRIFT_SHAPES = {
+    "two long runs": (2, 60.0, 200.0, 7.0, 6.5, 36.0, 0.6, 0.0, 8, 3),
+    "one long drive": (1, 62.0, 350.0, 5.64, 6.8, 35.0, 0.68, 0.7, 6, 2),
+}
 
 
-def test_slow_drift_on_one_long_drive_is_not_structure():
-    """One 62 s drive at 350 Hz, every third 5.6 s span held out, white noise with a slow OU
-    drift (35 s, 68 % of the 6.8 N*m), the noise models floored at the model's own white noise
-    as the diagnosis does. The GLS fit whitens its regression with a noise model of what it
-    leaves in sample, which knows nothing of the drift; on the slow columns it interpolated the
-    drift between the training spans, and 7 of 10 seeds read as structure (t up to 21, plain
-    held-out mean square -30 %). It must also beat the null residual's own noise model now. A
-    3 % torque bias with the slip power is still found."""
+@pytest.mark.parametrize("shape", list(SLOW_DRIFT_SHAPES))
+def test_slow_drift_over_long_runs_is_not_structure(shape):
+    """Few long runs with held-out time spans, the sensor drifting slowly (OU) on top of white
+    noise. Slow library columns (energy, pack temperature) follow a training stretch's drift in
+    sample and interpolate it across the held-out spans next to it; the held-out test must not
+    take that for structure the inputs drive. A 3 % torque bias with the slip power, under the
+    same noise, is still found.
+
+    Two runs of 60 s at 200 Hz: on the plain ridge's in-sample residual the noise model saw
+    almost no drift, and the null residual's drift then passed for a gain (3 of these 8 seeds, t
+    up to 19). Fitting the noise model to the cross-fitted residual alone still left one (t =
+    13.9); the structure must also beat the null residual's own noise model.
+
+    One 62 s drive at 350 Hz, noise models floored at the model's own white noise as the
+    diagnosis does: the GLS fit whitens its regression with a noise model of what it leaves in
+    sample, which knows nothing of the drift, and 5 of these 6 seeds read as structure (7 of 10
+    in a wider run; t up to 21, plain held-out mean square -30 %). It must beat the null
+    residual's own noise model too."""
     from clutch_model.diagnosis.noise_model import white_floor
-    rate_hz, sigma = 350.0, 6.8
+    n_runs, duration_s, rate_hz, span_s, sigma, tau_s, share, floor, n_seeds, n_bias = SLOW_DRIFT_SHAPES[shape]
     flagged = []
-    for seed in range(6):
-        d = make_inputs(seed, n_runs=1, duration_s=62.0, rate_hz=rate_hz)
+    for seed in range(n_seeds):
+        d = make_inputs(seed, n_runs=n_runs, duration_s=duration_s, rate_hz=rate_hz)
         names, X = input_features(feature_signals(d), d["t"], d["run_start"], torque=d["torque"])
-        train, test = split_spans(d["t"], d["run_start"], span_s=5.64)
-        noise = ou_drift_noise(d["run_start"], sigma, 500 + seed, rate_hz=rate_hz, tau_s=35.0, drift_share=0.68)
-        with white_floor((0.7 * sigma) ** 2):
+        train, test = split_spans(d["t"], d["run_start"], span_s=span_s)
+        noise = ou_drift_noise(d["run_start"], sigma, 500 + seed, rate_hz=rate_hz, tau_s=tau_s, drift_share=share)
+        with white_floor((floor * sigma) ** 2):
             res = structure_test(noise, X, train, test, d["run_start"], d["t"], names, min_gain_frac=0.01)
             if res.structured:
                 flagged.append((seed, res.comparison.t_stat, res.comparison.gain_frac))
-            if seed < 2:
+            if seed < n_bias:
                 bias = 0.03 * d["torque"] * d["power"] / np.mean(d["power"])
                 found = structure_test(noise + bias, X, train, test, d["run_start"], d["t"], names,
                                        min_gain_frac=0.01)
