@@ -37,6 +37,7 @@ from clutch_model.diagnosis import features as F
 from clutch_model.diagnosis.candidates import CampaignContext, MechanismCandidate, baseline_fit
 from clutch_model.diagnosis.input_hold import decide_input_noise, with_midpoint_force, with_smoothed_slip
 from clutch_model.diagnosis.lockup import without_locked_torque
+from clutch_model.diagnosis.force_dynamics import named_or_force_dynamics
 from clutch_model.diagnosis.fitting import CANDIDATE_IDS, CandidateFit, fit_candidate
 from clutch_model.diagnosis.noise_model import fit_noise_model, white_floor
 from clutch_model.diagnosis.selection import (Selection, SelectionData, leaves_of, refit_chain, residual,
@@ -501,6 +502,12 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
                         min_gain_frac=NAMED_GAIN_FRAC, structure_min_gain_frac=STRUCTURE_GAIN_FRAC,
                         plain_gain=True, progress=say)
     timings["candidates"] = time.perf_counter() - t0
+    force_dynamics = None
+    if sel.verdict == "named":
+        # a named time mechanism against a force path beyond the catalog (force_dynamics.py)
+        t0 = time.perf_counter()
+        sel, force_dynamics = named_or_force_dynamics(data, sel, campaign, sigma_guess, ALPHA, NAMED_GAIN_FRAC, say)
+        timings["force dynamics"] = time.perf_counter() - t0
 
     first = sel.steps[0].scores if sel.steps else []
     fits = []

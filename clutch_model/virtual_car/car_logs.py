@@ -43,6 +43,11 @@ Effects outside the catalog (``effects``: [{"name": ..., parameter: value}]):
                                      on fast edges, nothing on slow ones (a force-path effect:
                                      the plant is driven by the limited force, the force sensor
                                      reads the request)
+  actuator_second_order  f_n_hz      the pack force follows the measured force through a
+                         (damping 0.7) second-order response (natural frequency f_n, damping
+                                     ratio): a hydraulic / motor-and-gear actuator with inertia;
+                                     mimics transport_delay and actuator_lag (group delay
+                                     2·damping/(2π·f_n)); a force-path effect like the rate limit
 Plant effects (the last three) run in ``_trajectory_friction_factor``, the kernels' own step
 functions with the friction factor written through the degradation slot each row (so the
 factor heats the pack like any friction); measurement effects post-process the fine grid.
@@ -92,6 +97,11 @@ EFFECTS = {
                             "mimics": "actuator_lag", "catalog_equivalent": None,
                             "physics": "the actuator's motor slews the pack force at most "
                                        "rate_n_per_s toward the measured force (slew-rate limit)"},
+    "actuator_second_order": {"kind": "force-path", "parameters": {"f_n_hz": 2.5, "damping": 0.7},
+                              "mimics": "transport_delay", "catalog_equivalent": None,
+                              "physics": "the pack force follows the measured force through a "
+                                         "second-order response (natural frequency f_n_hz, damping "
+                                         "ratio): an actuator with inertia"},
 }
 
 DEFAULT_CLOCKS = {
@@ -448,6 +458,21 @@ def _slew_limited(force, run_start, step_n):
     return out
 
 
+def _second_order_per_run(force, run_start, f_n_hz, damping, dt_s):
+    """The force each fine row reaches through a unit-gain second-order response (natural
+    frequency ``f_n_hz``, damping ratio ``damping``; exact zero-order-hold discretisation),
+    restarted at rest at the request at each run's start."""
+    w = 2.0 * math.pi * f_n_hz
+    b, a, _ = sps.cont2discrete(([w * w], [1.0, 2.0 * damping * w, w * w]), dt_s, method="zoh")
+    b = np.ravel(b)
+    zi = sps.lfilter_zi(b, a)
+    out = np.empty_like(force)
+    starts = list(np.flatnonzero(run_start)) + [force.size]
+    for s0, s1 in zip(starts[:-1], starts[1:]):
+        out[s0:s1], _ = sps.lfilter(b, a, force[s0:s1], zi=zi * force[s0])
+    return out
+
+
 def _lowpass_per_run(t, y, run_start, tau_s):
     out = np.empty_like(y)
     starts = list(np.flatnonzero(run_start)) + [y.size]
@@ -504,6 +529,10 @@ def synthesize_car_logs(spec: CarLogSpec | None = None, base_model: ClutchModel 
     rate = spec.effect_values("actuator_rate_limit")
     if rate is not None:
         force_pack = _slew_limited(force_all, run_start, float(rate["rate_n_per_s"]) / spec.fine_rate_hz)
+    second = spec.effect_values("actuator_second_order")
+    if second is not None:
+        force_pack = _second_order_per_run(force_pack, run_start, float(second["f_n_hz"]),
+                                           float(second["damping"]), 1.0 / spec.fine_rate_hz)
     plant, eff_info = _simulate_plant(true_model, spec, t_abs, force_pack, slip_all, sump_all, run_start, rng_eff)
     # the driveline sets the transmitted torque while locked (below the static capacity)
     locked = plant["locked"] & np.isfinite(load_all)

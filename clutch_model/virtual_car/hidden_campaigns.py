@@ -128,7 +128,8 @@ EFFECT_RANGES = {"torque_sensor_lowpass": ("tau_s", (0.02, 0.15)),
                  "run_friction_level": ("spread", (0.06, 0.12)),
                  "torque_ripple": ("amplitude", (0.05, 0.15)),
                  "pressure_temperature_cross": ("coeff", (1.5e-3, 4e-3)),
-                 "actuator_rate_limit": ("rate_n_per_s", (2.0e4, 6.0e4))}
+                 "actuator_rate_limit": ("rate_n_per_s", (2.0e4, 6.0e4)),
+                 "actuator_second_order": ("f_n_hz", (1.5, 4.0))}
 
 
 @dataclass(frozen=True)
@@ -149,7 +150,8 @@ def _cases() -> dict:
              ("transport_delay", "drag_torque"))]
     out += [Case(e, "lookalike" if EFFECTS[e]["mimics"] else "outside", effects=(e,))
             for e in ("torque_sensor_lowpass", "slip_power_fade", "run_friction_level",
-                      "torque_ripple", "pressure_temperature_cross", "actuator_rate_limit")]
+                      "torque_ripple", "pressure_temperature_cross", "actuator_rate_limit",
+                      "actuator_second_order")]
     return {c.name: c for c in out}
 
 

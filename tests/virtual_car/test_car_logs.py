@@ -224,6 +224,43 @@ def test_actuator_rate_limit_drives_the_plant_with_the_slew_limited_force():
     assert np.sqrt(np.mean(d ** 2)) > 5.0
 
 
+def test_actuator_second_order_drives_the_plant_with_the_filtered_force():
+    """actuator_second_order: the plant sees the request through x'' = w^2 (F - x) - 2 zeta w x'
+    (at rest at the request at the run's start), the force sensor reads the request. The
+    reference pack force comes from solve_ivp (tight tolerance) on the request held over each
+    fine step; the plant driven with it must give the generated torque."""
+    from scipy.integrate import solve_ivp
+    from clutch_model.virtual_car.car_logs import CarLogSpec, synthesize_car_logs
+    f_n, zeta = 2.4, 0.6
+    base = synthesize_car_logs(CarLogSpec(seed=2, n_runs=1))
+    on = synthesize_car_logs(CarLogSpec(seed=2, n_runs=1, effects=[{"name": "actuator_second_order",
+                                                                    "f_n_hz": f_n, "damping": zeta}]))
+    fb, fo = base.runs[0].fine, on.runs[0].fine
+    np.testing.assert_array_equal(fo["applied_force_n"], fb["applied_force_n"])
+    t, request = fb["t_s"], fb["applied_force_n"]
+    dt, w = float(t[1] - t[0]), 2 * np.pi * f_n
+
+    def rhs(tt, z):
+        k = min(int(np.floor(tt / dt + 1e-9)), request.size - 1)
+        return [z[1], w * w * (request[k] - z[0]) - 2 * zeta * w * z[1]]
+    ref_pack = np.empty_like(request)
+    z = np.array([request[0], 0.0])
+    ref_pack[0] = z[0]
+    for k in range(1, request.size):   # one solve per held step: the input is smooth inside it
+        z = solve_ivp(rhs, (t[k - 1], t[k]), z, rtol=1e-10, atol=1e-8, method="DOP853", first_step=dt / 4).y[:, -1]
+        ref_pack[k] = z[0]
+    run_start = np.zeros(t.size, bool)
+    run_start[0] = True
+    ref = simulate(on.true_model, t, ref_pack, fb["slip_speed_rad_s"], fb["sump_temperature_c"], run_start=run_start)
+    slipping = ~(fo["locked"] | fb["locked"])
+    np.testing.assert_allclose(fo["torque_nm"][slipping], ref.torque_nm[slipping], rtol=1e-6, atol=1e-3)
+    d = fo["torque_nm"][slipping] - fb["torque_nm"][slipping]
+    assert np.sqrt(np.mean(d ** 2)) > 10.0          # the force path is visibly slower
+    truth = on.truth["effects"][0]
+    assert truth["name"] == "actuator_second_order" and truth["parameters"] == {"f_n_hz": f_n, "damping": zeta}
+    assert on.spec.expected_cause == "unexplained"
+
+
 def test_cli_car_logs(tmp_path):
     from clutch_sim.cli import main
     out = tmp_path / "c"

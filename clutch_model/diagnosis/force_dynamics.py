@@ -1,0 +1,210 @@
+"""A second-order force path: the rival beyond the catalog of a named time mechanism.
+
+The catalog's time mechanisms (``transport_delay``, ``actuator_lag``, ``torque_sensor_lag``)
+each give the torque one shape of delay. An actuator with inertia (a hydraulic piston, a motor
+and gear train) moves the pack force through a second-order response,
+
+    x'' = w^2 (F - x) - 2 zeta w x',     w = 2 pi f_n,
+
+which no catalog mechanism is: at a damping of 0.5-0.7 a pure delay matches it to second
+order in frequency (both lag by 2 zeta / w), and its residual after the delay is a short
+misfit at the force's edges that a library of first-order dynamics does not carry. When a
+time mechanism is named, this rival takes its place (the same model, its friction correction
+refitted with the rival, the other named causes kept) and the two meet head to head on the
+held-out rows: the rival taking the name means the force path is not the named mechanism's and
+the answer is ``unexplained``. The rival is flexible enough to mimic a first-order lag (an
+overdamped pair, one pole far out), so on a true lag it can only tie; it cannot delay the
+slip-driven torque as a transport delay or a sensor lag does.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+from numba import njit
+from scipy.optimize import least_squares
+
+from clutch_model.diagnosis.fitting import N_CORR, CampaignObjective, _rmse, start_shift
+from clutch_model.plant.mechanisms import CATALOG, ParamSpec
+from clutch_model.plant.params import ClutchModel
+from clutch_model.prediction import predict_campaign
+
+F_N_BOUNDS_HZ = (0.2, 40.0)
+DAMPING_BOUNDS = (0.2, 5.0)
+START_DAMPINGS = (0.5, 0.7, 1.0, 2.5)
+MAX_SUBSTEP_S = 5e-4
+
+
+@njit(cache=True)
+def second_order_force(t, force, run_start, f_n_hz, damping, max_substep_s=MAX_SUBSTEP_S):
+    """The force through x'' = w^2 (F - x) - 2 zeta w x' on the rows ``t`` (s), each run from
+    rest at its first force; F is linear between rows, integrated by RK4 in substeps of at
+    most ``max_substep_s``."""
+    n = force.size
+    out = np.empty(n)
+    w = 2.0 * math.pi * f_n_hz
+    w2, c = w * w, 2.0 * damping * w
+    x, v = 0.0, 0.0
+    for k in range(n):
+        if k == 0 or run_start[k]:
+            x, v = force[k], 0.0
+            out[k] = x
+            continue
+        dt = t[k] - t[k - 1]
+        if not dt > 0.0:
+            out[k] = x
+            continue
+        m = int(math.ceil(dt / max_substep_s))
+        h = dt / m
+        f0, f1 = force[k - 1], force[k]
+        for j in range(m):
+            fa = f0 + (f1 - f0) * (j / m)
+            fm = f0 + (f1 - f0) * ((j + 0.5) / m)
+            fb = f0 + (f1 - f0) * ((j + 1.0) / m)
+            k1x, k1v = v, w2 * (fa - x) - c * v
+            x2, v2 = x + 0.5 * h * k1x, v + 0.5 * h * k1v
+            k2x, k2v = v2, w2 * (fm - x2) - c * v2
+            x3, v3 = x + 0.5 * h * k2x, v + 0.5 * h * k2v
+            k3x, k3v = v3, w2 * (fm - x3) - c * v3
+            x4, v4 = x + h * k3x, v + h * k3v
+            k4x, k4v = v4, w2 * (fb - x4) - c * v4
+            x += h / 6.0 * (k1x + 2 * k2x + 2 * k3x + k4x)
+            v += h / 6.0 * (k1v + 2 * k2v + 2 * k3v + k4v)
+        out[k] = x
+    return out
+
+
+def time_mechanism_ids(ids) -> list:
+    """The ids among ``ids`` whose mechanism has a parameter in seconds (a delay, a lag)."""
+    return [i for i in ids if any(p.unit == "s" for p in getattr(CATALOG.get(i), "parameters", ()))]
+
+
+def group_delay_s(mechanisms) -> float:
+    """The low-frequency delay the time mechanisms give the torque (their seconds summed)."""
+    total = 0.0
+    for m in mechanisms:
+        for p in getattr(CATALOG.get(m.id), "parameters", ()):
+            if p.unit == "s":
+                total += float(m.values[p.name])
+    return total
+
+
+def _specs(delay_s: float) -> list:
+    f0 = 2.0 * 0.7 / (2 * math.pi * max(delay_s, 1e-3))
+    return [ParamSpec("f_n_hz", True, F_N_BOUNDS_HZ[0], F_N_BOUNDS_HZ[1], np.array([f0])),
+            ParamSpec("damping", True, DAMPING_BOUNDS[0], DAMPING_BOUNDS[1], np.array([0.7]))]
+
+
+class SecondOrderObjective(CampaignObjective):
+    """x = [log f_n, log damping] followed by the friction correction; the base model's force
+    goes through the second-order path before the plant."""
+
+    def __init__(self, base: ClutchModel, campaign, fit_mask, delay_s: float, noise_sigma_nm: float = 1.0):
+        super().__init__(base, campaign, fit_mask, None, _specs(delay_s), fit_friction=True,
+                         noise_sigma_nm=noise_sigma_nm)
+
+    def _predict_xs(self, xs) -> np.ndarray:
+        pi = self._plant_inputs
+        out = []
+        for x in np.atleast_2d(np.asarray(xs, float)):
+            f_n, zeta = (s.from_x(v) for s, v in zip(self.specs, x[:2]))
+            force = second_order_force(pi.t, pi.force, pi.run_start, f_n, zeta)
+            out.append(predict_campaign([self.model_at(x)], replace(pi, force=force), energy0_j=0.0).torque_nm[0])
+        return np.vstack(out)
+
+
+@dataclass
+class SecondOrderFit:
+    """The rival fitted: its parameters, the model it drives (friction corrected) and its
+    prediction and residual on the whole campaign."""
+
+    parameters: dict
+    model: ClutchModel
+    predicted: np.ndarray
+    residual: np.ndarray
+    fit_rmse_nm: float
+    friction_correction: np.ndarray
+
+
+def fit_second_order(base: ClutchModel, campaign, fit_mask, delay_s: float, noise_sigma_nm: float = 1.0,
+                     max_nfev: int = 40) -> SecondOrderFit:
+    """The second-order force path on ``base`` (its time mechanisms already taken out), jointly
+    with the friction correction, on the training rows ``fit_mask``. Started from the best of
+    START_DAMPINGS at the group delay ``delay_s`` of the mechanism it stands in for."""
+    obj = SecondOrderObjective(base, campaign, fit_mask, delay_s, noise_sigma_nm)
+    lo, hi = obj.bounds()
+    starts = []
+    for zeta in START_DAMPINGS:
+        f_n = min(max(2.0 * zeta / (2 * math.pi * max(delay_s, 1e-3)), F_N_BOUNDS_HZ[0]), F_N_BOUNDS_HZ[1])
+        starts.append(np.concatenate([[math.log(f_n), math.log(zeta)], np.zeros(N_CORR)]))
+    xs = np.vstack(starts)
+    sse = np.nansum(obj.data_residuals(obj.predict(xs)) ** 2, axis=1)
+    x0 = np.clip(xs[int(np.argmin(sse))], lo + 1e-12, hi - 1e-12)
+    shift = start_shift(x0, obj.specs)
+    sol = least_squares(lambda u: obj.residuals(u - shift), x0 + shift, jac=lambda u: obj.jacobian(u - shift),
+                        bounds=(lo + shift, hi + shift), method="trf", x_scale="jac", max_nfev=max_nfev,
+                        xtol=1e-8, ftol=1e-8)
+    x = np.clip(sol.x - shift, lo, hi)
+    pred = obj.predict([x])[0]
+    resid = np.asarray(campaign.torque_measured, float) - pred
+    params = {s.name: s.from_x(x[j]) for j, s in enumerate(obj.specs)}
+    return SecondOrderFit(params, obj.model_at(x), pred, resid, _rmse(resid[obj.mask]), x[2:])
+
+
+def _predicting(fit: SecondOrderFit):
+    """The rival as a selection.Fitted (its prediction on the whole campaign)."""
+    class _Fitted:
+        id = "second_order_force_path"
+        parameters = fit.parameters
+
+        @staticmethod
+        def predict(data=None):
+            return fit.predicted
+    return _Fitted()
+
+
+def named_or_force_dynamics(data, sel, campaign, sigma_nm: float, alpha: float, min_gain_frac: float,
+                            say=lambda msg: None):
+    """A selection that named a time mechanism, checked against the second-order force path
+    (module docstring) -> (selection, what the check found: a dict for the report, or None
+    when there was nothing to check). The rival takes the named time mechanisms' place on the
+    final model; when it predicts the held-out residual significantly better than the named
+    model (at ``alpha``, ``min_gain_frac`` of the innovation variance, and a plain held-out
+    RMSE no larger), the named mechanism is a lookalike of a force path outside the catalog
+    and the verdict is ``unexplained``, the named causes the closest, with what they leave."""
+    from clutch_model.diagnosis.selection import Selection, _compare, residual
+    from clutch_model.diagnosis.structure_test import DEFAULT_MAX_ORDER
+
+    if sel.verdict != "named":
+        return sel, None
+    timed = time_mechanism_ids(sel.cause_ids)
+    if not timed:
+        return sel, None
+    model = sel.final.fit.model
+    stand_in = [m for m in model.mechanisms if m.id in timed]
+    base = model.with_mechanisms([m for m in model.mechanisms if m.id not in timed])
+    say(f"{', '.join(timed)} named: checking a second-order force path beyond the catalog in its place")
+    fit = fit_second_order(base, campaign, np.asarray(data.train_mask, bool), group_delay_s(stand_in),
+                           noise_sigma_nm=sigma_nm)
+    r_named = residual(data, sel.final)
+    r_rival = residual(data, _predicting(fit))
+    head = _compare(data, r_named, r_rival, DEFAULT_MAX_ORDER)
+    found = {"parameters": {k: float(v) for k, v in fit.parameters.items()}, "in_place_of": timed,
+             "held_out_t": float(head.t_stat), "held_out_p": float(head.p_value),
+             "innovation_variance_cut": float(head.gain_frac),
+             "held_out_rmse": float(head.rmse_alt), "named_held_out_rmse": float(head.rmse_null)}
+    say(f"second-order force path (f_n {fit.parameters['f_n_hz']:.3g} Hz, damping {fit.parameters['damping']:.3g}) "
+        f"against {', '.join(timed)} on held-out rows: t = {head.t_stat:.1f}, RMSE {head.rmse_alt:.2f} vs "
+        f"{head.rmse_null:.2f} N*m")
+    if not head.significant(alpha, min_gain_frac, plain_gain=True):
+        found["took_the_name"] = False
+        return sel, found
+    found["took_the_name"] = True
+    why = (f"{', '.join(sel.cause_ids)} predicts the held-out residual, but a second-order force path beyond "
+           f"the catalog (f_n {fit.parameters['f_n_hz']:.3g} Hz, damping {fit.parameters['damping']:.3g}) in "
+           f"place of {', '.join(timed)} predicts it better head to head (held-out t = {head.t_stat:.1f}, "
+           f"RMSE {head.rmse_alt:.2f} against {head.rmse_null:.2f} N*m): the force path is not the named one's")
+    left = {"held_out_rmse": float(head.rmse_null), "second_order_force_path": found}
+    return (Selection("unexplained", [], sel.steps, sel.final, sel.baseline_structure, sel.remainder_structure,
+                      list(sel.cause_ids), left, why, sel.run_level), found)
