@@ -167,6 +167,7 @@ class Diagnosis:
     diagnosis_rate: dict = field(default_factory=dict)   # decimation plan (diagnosis.decimation)
     diagnosis_sample: dict = field(default_factory=dict)  # windows of a long campaign (diagnosis.sample)
     inputs: dict = field(default_factory=dict)  # the inputs' noise: slip smoothed, noise floor (input_hold.InputNoise)
+    force_path_check: dict | None = None  # a named time mechanism against a second-order force path (force_dynamics.py)
 
     @property
     def gain_pct(self) -> float:
@@ -611,7 +612,7 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
                   split=split, fit_mask=fit_mask, eval_mask=eval_mask, locked_rows=int(locked.sum()),
                   noise=noise, bench_info=bench_info or {}, calibration_info=calibration_info, timings=timings,
                   discovery=discovery, diagnosis_rate=diagnosis_rate, diagnosis_sample=sample_info,
-                  inputs=inputs)
+                  inputs=inputs, force_path_check=force_dynamics)
     emit("selected", diagnosis=d)
     return d
 
