@@ -105,13 +105,19 @@ class SecondOrderObjective(CampaignObjective):
                          noise_sigma_nm=noise_sigma_nm)
 
     def _predict_xs(self, xs) -> np.ndarray:
+        """One simulation batch per force path: the parameter sets that differ only in the
+        friction correction (most of a Jacobian's columns) share the filtered force."""
         pi = self._plant_inputs
-        out = []
-        for x in np.atleast_2d(np.asarray(xs, float)):
-            f_n, zeta = (s.from_x(v) for s, v in zip(self.specs, x[:2]))
-            force = second_order_force(pi.t, pi.force, pi.run_start, f_n, zeta)
-            out.append(predict_campaign([self.model_at(x)], replace(pi, force=force), energy0_j=0.0).torque_nm[0])
-        return np.vstack(out)
+        xs = np.atleast_2d(np.asarray(xs, float))
+        out = np.empty((xs.shape[0], pi.n_rows))
+        groups: dict = {}
+        for k, x in enumerate(xs):
+            groups.setdefault((float(x[0]), float(x[1])), []).append(k)
+        for (x0, x1), rows in groups.items():
+            force = second_order_force(pi.t, pi.force, pi.run_start, self.specs[0].from_x(x0), self.specs[1].from_x(x1))
+            out[rows] = predict_campaign([self.model_at(xs[k]) for k in rows], replace(pi, force=force),
+                                         energy0_j=0.0).torque_nm
+        return out
 
 
 @dataclass

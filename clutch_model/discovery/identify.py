@@ -644,11 +644,19 @@ def _refit_terms(chosen, column, sig, sim, fit_rows, anchor, campaign, sigma, sa
         coefs = refit.coefficients(x)
         terms = refit.terms_at(x)
         half, half_log_tau = _ci95(refit, x, campaign)
-    tau_ci = {terms[i].id: [float(terms[i].tau_s * math.exp(-h)), float(terms[i].tau_s * math.exp(h))]
-              for i, h in zip(refit.lagged, half_log_tau)}
+    tau_ci = {terms[i].id: tau_interval_s(terms[i].tau_s, h) for i, h in zip(refit.lagged, half_log_tau)}
     return {"terms": terms, "coefficients": coefs, "model": refit.model_at(x), "predicted": refit.predict([x])[0],
             "ci": {t.id: [float(c - h), float(c + h)] for t, c, h in zip(terms, coefs, half)},
             "tau_ci95_s": tau_ci}
+
+
+def tau_interval_s(tau_s: float, half_log_tau: float) -> list:
+    """[tau e^-h, tau e^h]: the 95 % interval of a time constant whose log has half-width h. A
+    time constant the rows do not resolve has an interval of [0, inf]: its half-width in log
+    may exceed exp's range (h = 1e3 raised OverflowError and ended a diagnosis: a second-order
+    actuator on the car, seed 3 of the matrix)."""
+    with np.errstate(over="ignore"):
+        return [float(tau_s * np.exp(-half_log_tau)), float(tau_s * np.exp(half_log_tau))]
 
 
 def _record_energy_history(model: ClutchModel, campaign) -> None:

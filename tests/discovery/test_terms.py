@@ -108,3 +108,14 @@ def test_unseen_range_prior_holds_the_friction_correction_only_outside_the_fit_r
     wide = SimpleNamespace(pressure_mpa=np.linspace(0.0, 1.0, n), pack_temperature_c=np.linspace(10.0, 160.0, n))
     held = unseen_range_prior(wide, slip, np.ones(n, bool), sigma_nm=sigma)
     assert np.all(held[0::2, 1] / held[0, 0] + P_CENTER_MPA > 1.05)
+
+
+def test_an_unresolved_time_constant_has_the_interval_zero_to_infinity():
+    """A low-passed term's time constant whose log half-width exceeds exp's range (1e3 ended a
+    diagnosis with OverflowError) gets [0, inf]; a resolved one tau e^-h .. tau e^h."""
+    import math
+
+    from clutch_model.discovery.identify import tau_interval_s
+    assert tau_interval_s(0.08, 1e3) == [0.0, math.inf]
+    lo, hi = tau_interval_s(0.08, 0.5)
+    assert lo == pytest.approx(0.08 * math.exp(-0.5)) and hi == pytest.approx(0.08 * math.exp(0.5))
