@@ -215,13 +215,22 @@ def test_actuator_rate_limit_drives_the_plant_with_the_slew_limited_force():
     pack[0] = request[0]
     for k in range(1, request.size):
         pack[k] = pack[k - 1] + np.clip(request[k] - pack[k - 1], -step, step)
-    run_start = np.zeros(t.size, bool)
+    _assert_plant_driven_by(pack, on, base, rtol=1e-9, atol=1e-6, min_change_rms_nm=5.0)
+
+
+def _assert_plant_driven_by(pack_force, on, base, rtol, atol, min_change_rms_nm):
+    """The effect's one-run campaign ``on`` is the plant driven by ``pack_force`` (the request of
+    the effect-free ``base`` through the effect) while slipping, and differs from ``base`` by
+    more than ``min_change_rms_nm`` RMS there."""
+    fb, fo = base.runs[0].fine, on.runs[0].fine
+    run_start = np.zeros(fb["t_s"].size, bool)
     run_start[0] = True
-    ref = simulate(on.true_model, t, pack, fb["slip_speed_rad_s"], fb["sump_temperature_c"], run_start=run_start)
+    ref = simulate(on.true_model, fb["t_s"], pack_force, fb["slip_speed_rad_s"], fb["sump_temperature_c"],
+                   run_start=run_start)
     slipping = ~(fo["locked"] | fb["locked"])
-    np.testing.assert_allclose(fo["torque_nm"][slipping], ref.torque_nm[slipping], rtol=1e-9, atol=1e-6)
+    np.testing.assert_allclose(fo["torque_nm"][slipping], ref.torque_nm[slipping], rtol=rtol, atol=atol)
     d = fo["torque_nm"][slipping] - fb["torque_nm"][slipping]
-    assert np.sqrt(np.mean(d ** 2)) > 5.0
+    assert np.sqrt(np.mean(d ** 2)) > min_change_rms_nm
 
 
 def test_actuator_second_order_drives_the_plant_with_the_filtered_force():
@@ -249,13 +258,8 @@ def test_actuator_second_order_drives_the_plant_with_the_filtered_force():
     for k in range(1, request.size):   # one solve per held step: the input is smooth inside it
         z = solve_ivp(rhs, (t[k - 1], t[k]), z, rtol=1e-10, atol=1e-8, method="DOP853", first_step=dt / 4).y[:, -1]
         ref_pack[k] = z[0]
-    run_start = np.zeros(t.size, bool)
-    run_start[0] = True
-    ref = simulate(on.true_model, t, ref_pack, fb["slip_speed_rad_s"], fb["sump_temperature_c"], run_start=run_start)
-    slipping = ~(fo["locked"] | fb["locked"])
-    np.testing.assert_allclose(fo["torque_nm"][slipping], ref.torque_nm[slipping], rtol=1e-6, atol=1e-3)
-    d = fo["torque_nm"][slipping] - fb["torque_nm"][slipping]
-    assert np.sqrt(np.mean(d ** 2)) > 10.0          # the force path is visibly slower
+    # the force path is visibly slower
+    _assert_plant_driven_by(ref_pack, on, base, rtol=1e-6, atol=1e-3, min_change_rms_nm=10.0)
     truth = on.truth["effects"][0]
     assert truth["name"] == "actuator_second_order" and truth["parameters"] == {"f_n_hz": f_n, "damping": zeta}
     assert on.spec.expected_cause == "unexplained"
