@@ -291,3 +291,15 @@ def test_score_against_truth(short_campaign):
     assert bad["rmse_nm"] == pytest.approx(np.hypot(20.0, good["rmse_nm"]), rel=0.1)
     side = sidecar(paths, runs[0].name)
     np.testing.assert_allclose(true_sensor_torque_at(side, side["fine_t_s"][5:9]), side["fine_sensor_torque_nm"][5:9])
+
+
+def test_synth_help_names_every_effect(capsys):
+    """`clutch-sim synth --help` lists every effect the virtual car knows (the list is written
+    out in the parser, which must not import the car)."""
+    from clutch_model.virtual_car.car_logs import EFFECTS
+    from clutch_sim.cli import main
+    with pytest.raises(SystemExit):
+        main(["synth", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    for name in EFFECTS:
+        assert name in text, name
