@@ -503,12 +503,10 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
                         min_gain_frac=NAMED_GAIN_FRAC, structure_min_gain_frac=STRUCTURE_GAIN_FRAC,
                         plain_gain=True, progress=say)
     timings["candidates"] = time.perf_counter() - t0
-    force_dynamics = None
-    if sel.verdict == "named":
-        # a named time mechanism against a force path beyond the catalog (force_dynamics.py)
-        t0 = time.perf_counter()
-        sel, force_dynamics = named_or_force_dynamics(data, sel, campaign, sigma_guess, ALPHA, NAMED_GAIN_FRAC, say)
-        timings["force dynamics"] = time.perf_counter() - t0
+    # a named time mechanism against a force path beyond the catalog (force_dynamics.py)
+    t0 = time.perf_counter()
+    sel, force_dynamics = named_or_force_dynamics(data, sel, campaign, sigma_guess, ALPHA, NAMED_GAIN_FRAC, say)
+    timings["force dynamics"] = time.perf_counter() - t0
 
     first = sel.steps[0].scores if sel.steps else []
     fits = []

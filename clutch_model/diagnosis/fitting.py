@@ -166,6 +166,20 @@ def start_shift(x0: np.ndarray, specs) -> np.ndarray:
     return shift
 
 
+def solve_from(obj: CampaignObjective, x0: np.ndarray, max_nfev: int) -> np.ndarray:
+    """The least-squares solution of ``obj`` from ``x0`` (trf within its bounds; x0 clipped just
+    inside them)."""
+    lo, hi = obj.bounds()
+    x0 = np.clip(x0, lo + 1e-12, hi - 1e-12)
+    # solved in u = x + shift: trf's first trust radius is |x0| in Jacobian-scaled units, so
+    # a start at ~0 (an offset's grid centre, a drag coefficient at its bound) would never move
+    shift = start_shift(x0, obj.specs)
+    sol = least_squares(lambda u: obj.residuals(u - shift), x0 + shift, jac=lambda u: obj.jacobian(u - shift),
+                        bounds=(lo + shift, hi + shift), method="trf", x_scale="jac", max_nfev=max_nfev,
+                        xtol=1e-8, ftol=1e-8)
+    return np.clip(sol.x - shift, lo, hi)     # the shift's rounding kept off the bounds' wrong side
+
+
 def fit_candidate(base: ClutchModel, campaign: Campaign, fit_mask: np.ndarray, mech_id: str | None,
                   energy_total_j: float, torque_scale: float, fit_friction: bool = True,
                   max_nfev: int = 40, noise_sigma_nm: float = 1.0, start: dict | None = None) -> CandidateFit:
@@ -173,7 +187,6 @@ def fit_candidate(base: ClutchModel, campaign: Campaign, fit_mask: np.ndarray, m
     specs = search_space(mech_id, campaign, energy_total_j, torque_scale) if mech_id else []
     obj = CampaignObjective(base, campaign, fit_mask, mech_id, specs, fit_friction, noise_sigma_nm)
     n_corr = N_CORR if fit_friction else 0
-    lo, hi = obj.bounds()
     # start: the best point of the mechanism's grid (friction correction at 0), one batch
     if specs and start:
         x0 = np.concatenate([[s.to_x(start[s.name]) for s in specs], np.zeros(n_corr)])
@@ -185,17 +198,7 @@ def fit_candidate(base: ClutchModel, campaign: Campaign, fit_mask: np.ndarray, m
         x0 = xs[int(np.argmin(sse))]
     else:
         x0 = np.zeros(n_corr)
-    x0 = np.clip(x0, lo + 1e-12, hi - 1e-12)
-    if x0.size:
-        # solved in u = x + shift: trf's first trust radius is |x0| in Jacobian-scaled units, so
-        # a start at ~0 (an offset's grid centre, a drag coefficient at its bound) would never move
-        shift = start_shift(x0, specs)
-        sol = least_squares(lambda u: obj.residuals(u - shift), x0 + shift, jac=lambda u: obj.jacobian(u - shift),
-                            bounds=(lo + shift, hi + shift), method="trf", x_scale="jac", max_nfev=max_nfev,
-                            xtol=1e-8, ftol=1e-8)
-        x = np.clip(sol.x - shift, lo, hi)     # the shift's rounding kept off the bounds' wrong side
-    else:
-        x = x0
+    x = solve_from(obj, x0, max_nfev) if x0.size else x0
     model = obj.model_at(x)
     pred = obj.predict([x])[0]
     resid = campaign.torque_measured - pred

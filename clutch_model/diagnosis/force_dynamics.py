@@ -23,9 +23,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 from numba import njit
-from scipy.optimize import least_squares
 
-from clutch_model.diagnosis.fitting import N_CORR, CampaignObjective, _rmse, start_shift
+from clutch_model.diagnosis.fitting import N_CORR, CampaignObjective, solve_from
 from clutch_model.plant.mechanisms import CATALOG, ParamSpec
 from clutch_model.plant.params import ClutchModel
 from clutch_model.prediction import predict_campaign
@@ -75,24 +74,29 @@ def second_order_force(t, force, run_start, f_n_hz, damping, max_substep_s=MAX_S
     return out
 
 
+def _time_parameter_names(mech_id: str) -> list:
+    """Names of the catalog mechanism's parameters in seconds (a delay, a lag)."""
+    return [p.name for p in getattr(CATALOG.get(mech_id), "parameters", ()) if p.unit == "s"]
+
+
 def time_mechanism_ids(ids) -> list:
     """The ids among ``ids`` whose mechanism has a parameter in seconds (a delay, a lag)."""
-    return [i for i in ids if any(p.unit == "s" for p in getattr(CATALOG.get(i), "parameters", ()))]
+    return [i for i in ids if _time_parameter_names(i)]
 
 
 def group_delay_s(mechanisms) -> float:
     """The low-frequency delay the time mechanisms give the torque (their seconds summed)."""
-    total = 0.0
-    for m in mechanisms:
-        for p in getattr(CATALOG.get(m.id), "parameters", ()):
-            if p.unit == "s":
-                total += float(m.values[p.name])
-    return total
+    return float(sum(float(m.values[name]) for m in mechanisms for name in _time_parameter_names(m.id)))
+
+
+def _start_f_n_hz(damping: float, delay_s: float) -> float:
+    """The natural frequency whose group delay 2 damping / w is ``delay_s``, within the bounds."""
+    f_n = 2.0 * damping / (2 * math.pi * max(delay_s, 1e-3))
+    return min(max(f_n, F_N_BOUNDS_HZ[0]), F_N_BOUNDS_HZ[1])
 
 
 def _specs(delay_s: float) -> list:
-    f0 = 2.0 * 0.7 / (2 * math.pi * max(delay_s, 1e-3))
-    return [ParamSpec("f_n_hz", True, F_N_BOUNDS_HZ[0], F_N_BOUNDS_HZ[1], np.array([f0])),
+    return [ParamSpec("f_n_hz", True, F_N_BOUNDS_HZ[0], F_N_BOUNDS_HZ[1], np.array([_start_f_n_hz(0.7, delay_s)])),
             ParamSpec("damping", True, DAMPING_BOUNDS[0], DAMPING_BOUNDS[1], np.array([0.7]))]
 
 
@@ -122,15 +126,16 @@ class SecondOrderObjective(CampaignObjective):
 
 @dataclass
 class SecondOrderFit:
-    """The rival fitted: its parameters, the model it drives (friction corrected) and its
-    prediction and residual on the whole campaign."""
+    """The rival fitted (a selection.Fitted): its parameters, the model it drives (friction
+    corrected; its force goes through the path) and its prediction on the whole campaign."""
 
     parameters: dict
     model: ClutchModel
     predicted: np.ndarray
-    residual: np.ndarray
-    fit_rmse_nm: float
-    friction_correction: np.ndarray
+    id: str = "second_order_force_path"
+
+    def predict(self, data=None) -> np.ndarray:
+        return self.predicted
 
 
 def fit_second_order(base: ClutchModel, campaign, fit_mask, delay_s: float, noise_sigma_nm: float = 1.0,
@@ -139,35 +144,12 @@ def fit_second_order(base: ClutchModel, campaign, fit_mask, delay_s: float, nois
     with the friction correction, on the training rows ``fit_mask``. Started from the best of
     START_DAMPINGS at the group delay ``delay_s`` of the mechanism it stands in for."""
     obj = SecondOrderObjective(base, campaign, fit_mask, delay_s, noise_sigma_nm)
-    lo, hi = obj.bounds()
-    starts = []
-    for zeta in START_DAMPINGS:
-        f_n = min(max(2.0 * zeta / (2 * math.pi * max(delay_s, 1e-3)), F_N_BOUNDS_HZ[0]), F_N_BOUNDS_HZ[1])
-        starts.append(np.concatenate([[math.log(f_n), math.log(zeta)], np.zeros(N_CORR)]))
-    xs = np.vstack(starts)
+    xs = np.vstack([np.concatenate([[math.log(_start_f_n_hz(zeta, delay_s)), math.log(zeta)], np.zeros(N_CORR)])
+                    for zeta in START_DAMPINGS])
     sse = np.nansum(obj.data_residuals(obj.predict(xs)) ** 2, axis=1)
-    x0 = np.clip(xs[int(np.argmin(sse))], lo + 1e-12, hi - 1e-12)
-    shift = start_shift(x0, obj.specs)
-    sol = least_squares(lambda u: obj.residuals(u - shift), x0 + shift, jac=lambda u: obj.jacobian(u - shift),
-                        bounds=(lo + shift, hi + shift), method="trf", x_scale="jac", max_nfev=max_nfev,
-                        xtol=1e-8, ftol=1e-8)
-    x = np.clip(sol.x - shift, lo, hi)
-    pred = obj.predict([x])[0]
-    resid = np.asarray(campaign.torque_measured, float) - pred
+    x = solve_from(obj, xs[int(np.argmin(sse))], max_nfev)
     params = {s.name: s.from_x(x[j]) for j, s in enumerate(obj.specs)}
-    return SecondOrderFit(params, obj.model_at(x), pred, resid, _rmse(resid[obj.mask]), x[2:])
-
-
-def _predicting(fit: SecondOrderFit):
-    """The rival as a selection.Fitted (its prediction on the whole campaign)."""
-    class _Fitted:
-        id = "second_order_force_path"
-        parameters = fit.parameters
-
-        @staticmethod
-        def predict(data=None):
-            return fit.predicted
-    return _Fitted()
+    return SecondOrderFit(params, obj.model_at(x), obj.predict([x])[0])
 
 
 def named_or_force_dynamics(data, sel, campaign, sigma_nm: float, alpha: float, min_gain_frac: float,
@@ -182,9 +164,7 @@ def named_or_force_dynamics(data, sel, campaign, sigma_nm: float, alpha: float, 
     from clutch_model.diagnosis.selection import Selection, _compare, residual
     from clutch_model.diagnosis.structure_test import DEFAULT_MAX_ORDER
 
-    if sel.verdict != "named":
-        return sel, None
-    timed = time_mechanism_ids(sel.cause_ids)
+    timed = time_mechanism_ids(sel.cause_ids) if sel.verdict == "named" else []
     if not timed:
         return sel, None
     model = sel.final.fit.model
@@ -194,7 +174,7 @@ def named_or_force_dynamics(data, sel, campaign, sigma_nm: float, alpha: float, 
     fit = fit_second_order(base, campaign, np.asarray(data.train_mask, bool), group_delay_s(stand_in),
                            noise_sigma_nm=sigma_nm)
     r_named = residual(data, sel.final)
-    r_rival = residual(data, _predicting(fit))
+    r_rival = residual(data, fit)
     head = _compare(data, r_named, r_rival, DEFAULT_MAX_ORDER)
     found = {"parameters": {k: float(v) for k, v in fit.parameters.items()}, "in_place_of": timed,
              "held_out_t": float(head.t_stat), "held_out_p": float(head.p_value),

@@ -68,6 +68,7 @@ from clutch_model.formats.bag_writer import DEFAULT_START_TIME_NS, RunSignals, T
 from clutch_model.plant import kernels as K
 from clutch_model.plant import params as P
 from clutch_model.plant.mechanisms import CATALOG, make_mechanism
+from clutch_model.plant.mechanisms.base import run_bounds
 from clutch_model.plant.params import ClutchModel, load_model
 from clutch_model.virtual_car.signals import (Noise, TopicClock, WhiteNoise, make_noise,
                                               sample_signal)
@@ -467,8 +468,7 @@ def _second_order_per_run(force, run_start, f_n_hz, damping, dt_s):
     b = np.ravel(b)
     zi = sps.lfilter_zi(b, a)
     out = np.empty_like(force)
-    starts = list(np.flatnonzero(run_start)) + [force.size]
-    for s0, s1 in zip(starts[:-1], starts[1:]):
+    for s0, s1 in run_bounds(run_start, force.size):
         out[s0:s1], _ = sps.lfilter(b, a, force[s0:s1], zi=zi * force[s0])
     return out
 
