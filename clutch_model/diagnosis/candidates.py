@@ -111,7 +111,8 @@ class ModelFit:
             return self.context.friction_only(self.base_model, self.mask)
         from clutch_model.prediction import predict_campaign
 
-        model = self.fit.model
+        # with co-fitted mechanisms moved, the twin is the model they were moved from
+        model = self.base_model if self.fit.co_parameters else self.fit.model
         twin = model.with_mechanisms([m for m in model.mechanisms if m.id != self.id])
         return np.asarray(predict_campaign([twin], self.context.campaign, energy0_j=0.0).torque_nm)[0]
 
@@ -122,19 +123,19 @@ class ModelFit:
         return any(True for _ in self._time_parameters())
 
     def _time_parameters(self):
-        """(mechanism id, Parameter) of each parameter in seconds of this fit's mechanisms."""
+        """(mechanism id, parameter name, fitted value) of each parameter in seconds of this
+        fit's mechanism and of those co-fitted with it."""
         if self.id == "baseline":
             return
-        for mech_id in self.id.split("+"):
-            for par in getattr(CATALOG.get(mech_id), "parameters", ()):
-                if par.unit == "s":
-                    yield mech_id, par
+        for mech_id, values in [(self.id, self.fit.parameters), *self.fit.co_parameters.items()]:
+            for name in CATALOG[mech_id].time_parameter_names() if mech_id in CATALOG else ():
+                yield mech_id, name, values.get(name)
 
     @property
     def time_parameter_names(self) -> tuple:
-        """Names of this fit's parameters in seconds (selection widens their intervals by the
-        rows' timing resolution)."""
-        return tuple(par.name for _, par in self._time_parameters())
+        """Names of this fit's own parameters in seconds (selection widens their intervals by
+        the rows' timing resolution)."""
+        return tuple(name for mech_id, name, _ in self._time_parameters() if mech_id == self.id)
 
     @property
     def below_resolution(self) -> str | None:
@@ -153,13 +154,12 @@ class ModelFit:
         (innovation variance -57 %, plain mean square -4 %)."""
         half_row_s = 0.5 * self.context.row_interval_s
         smooth_s = self.context.slip_smoothing_s
-        for mech_id, par in self._time_parameters():
-            v = self.fit.parameters.get(par.name)
+        for mech_id, name, v in self._time_parameters():
             if isinstance(v, (int, float)) and v < half_row_s:
-                return (f"{mech_id} {par.name} = {1e3 * v:.2g} ms is below the time resolution of the "
+                return (f"{mech_id} {name} = {1e3 * v:.2g} ms is below the time resolution of the "
                         f"data (half the {1e3 * self.context.row_interval_s:.3g} ms row interval)")
             if isinstance(v, (int, float)) and v < smooth_s:
-                return (f"{mech_id} {par.name} = {1e3 * v:.2g} ms is below the time resolution of the "
+                return (f"{mech_id} {name} = {1e3 * v:.2g} ms is below the time resolution of the "
                         f"model's inputs (the slip is smoothed with a {1e3 * smooth_s:.3g} ms Gaussian)")
         return self._below_force_resolution() or self._below_level_wander()
 
@@ -246,11 +246,16 @@ class ModelFit:
             return None
         ctx = self.context
         specs = search_space(self.id, ctx.campaign, ctx.energy_total_j, ctx.torque_scale)
-        obj = CampaignObjective(self.base_model, ctx.campaign, self.mask, self.id, specs,
-                                fit_friction=self.fit.joint, noise_sigma_nm=ctx.sigma_nm)
+        # the co-fitted mechanisms (fitting.co_fitted_ids) as fitted, their parameters nuisance columns
+        co = self.fit.co_parameters
+        co_specs = [(cid, search_space(cid, ctx.campaign, ctx.energy_total_j, ctx.torque_scale)) for cid in co]
+        base = self.base_model.with_mechanisms(self.fit.model.mechanisms) if co else self.base_model
+        obj = CampaignObjective(base, ctx.campaign, self.mask, self.id, specs, fit_friction=self.fit.joint,
+                                noise_sigma_nm=ctx.sigma_nm, co_specs=co_specs)
         x = np.array([s.to_x(self.fit.parameters[s.name]) for s in specs]
+                     + [s.to_x(co[cid][s.name]) for cid, cs in co_specs for s in cs]
                      + (list(self.fit.friction_correction) if self.fit.joint else []), float)
-        steps = np.where(np.arange(x.size) < len(specs), 1e-3 * np.maximum(np.abs(x), 1.0), 1e-4)
+        steps = np.where(np.arange(x.size) < obj.n_mech, 1e-3 * np.maximum(np.abs(x), 1.0), 1e-4)
         lo, hi = obj.bounds()
         steps = np.where(x + steps > hi, -steps, steps)
         xs = np.vstack([x, x[None, :] + np.diag(steps)])
@@ -264,10 +269,11 @@ def baseline_fit(calibrated: CandidateFit, base_model, context: CampaignContext,
 
 
 def fit_alone(ctx: CampaignContext, mech_id: str, base_model, mask, joint: bool = False,
-              start=None) -> CandidateFit:
-    """One fit of the mechanism on ``base_model`` (module doc)."""
+              start=None, co_start=None) -> CandidateFit:
+    """One fit of the mechanism on ``base_model`` (module doc; a time mechanism moves the time
+    mechanisms of the model with it, fitting.co_fitted_ids)."""
     return fit_candidate(base_model, ctx.campaign, mask, mech_id, ctx.energy_total_j, ctx.torque_scale,
-                         fit_friction=joint, noise_sigma_nm=ctx.sigma_nm, start=start)
+                         fit_friction=joint, noise_sigma_nm=ctx.sigma_nm, start=start, co_start=co_start)
 
 
 def fit_job(ctx: CampaignContext, mech_id: str, bases: list, mask) -> tuple:
@@ -282,14 +288,18 @@ def fit_job(ctx: CampaignContext, mech_id: str, bases: list, mask) -> tuple:
     return best, k_best
 
 
-def refine_job(ctx: CampaignContext, mech_id: str, bases: list, start: dict, mask) -> tuple:
+def refine_job(ctx: CampaignContext, mech_id: str, bases: list, start: dict, mask, co_start=None) -> tuple:
     """``MechanismCandidate.refine`` as a plain function: jointly with the friction correction
-    from each base (the first from ``start``, the others from the mechanism fitted alone on
-    them), the best on the training rows -> (CandidateFit, index of its base)."""
+    from each base (the first from ``start`` and ``co_start``, the others from the mechanism
+    fitted alone on them), the best on the training rows -> (CandidateFit, index of its base)."""
     best, k_best = None, 0
     for k, base in enumerate(bases):
-        st = start if k == 0 else fit_alone(ctx, mech_id, base, mask).parameters
-        cand = fit_alone(ctx, mech_id, base, mask, joint=True, start=st)
+        if k == 0:
+            st, co = start, co_start
+        else:
+            alone = fit_alone(ctx, mech_id, base, mask)
+            st, co = alone.parameters, alone.co_parameters
+        cand = fit_alone(ctx, mech_id, base, mask, joint=True, start=st, co_start=co)
         if best is None or cand.fit_rmse_nm < best.fit_rmse_nm:
             best, k_best = cand, k
     return best, k_best
@@ -341,4 +351,5 @@ class MechanismCandidate:
         bases = self.refine_bases(train)
         if self.executor is not None:
             return self._model_fit(self.executor.refine(self, fitted, train, bases), bases, train)
-        return self._model_fit(refine_job(self.context, self.id, bases, fitted.parameters, train.mask), bases, train)
+        return self._model_fit(refine_job(self.context, self.id, bases, fitted.parameters, train.mask,
+                                          fitted.fit.co_parameters), bases, train)

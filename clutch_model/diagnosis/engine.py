@@ -114,7 +114,7 @@ def choose_held_out(names: list, runs=None) -> list:
         raise DataError("holding out whole runs needs at least 2 car-test runs")
     if runs is None:
         n = len(names)
-        picks = [n // 2] if n == 3 else list(range(1, n, 3))
+        picks = [n // 2] if n == 3 else list(range(1, n, 3))     # without the runs' data: by position
     else:
         picks = _whole_run_picks(list(runs))
     return [names[k] for k in picks]

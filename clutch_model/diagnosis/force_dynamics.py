@@ -24,7 +24,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numba import njit
 
-from clutch_model.diagnosis.fitting import N_CORR, CampaignObjective, solve_from
+from clutch_model.diagnosis.fitting import N_CORR, CampaignObjective, solve_from, time_mechanism_ids
 from clutch_model.plant.mechanisms import CATALOG, ParamSpec
 from clutch_model.plant.params import ClutchModel
 from clutch_model.prediction import predict_campaign
@@ -74,19 +74,10 @@ def second_order_force(t, force, run_start, f_n_hz, damping, max_substep_s=MAX_S
     return out
 
 
-def _time_parameter_names(mech_id: str) -> list:
-    """Names of the catalog mechanism's parameters in seconds (a delay, a lag)."""
-    return [p.name for p in getattr(CATALOG.get(mech_id), "parameters", ()) if p.unit == "s"]
-
-
-def time_mechanism_ids(ids) -> list:
-    """The ids among ``ids`` whose mechanism has a parameter in seconds (a delay, a lag)."""
-    return [i for i in ids if _time_parameter_names(i)]
-
-
 def group_delay_s(mechanisms) -> float:
     """The low-frequency delay the time mechanisms give the torque (their seconds summed)."""
-    return float(sum(float(m.values[name]) for m in mechanisms for name in _time_parameter_names(m.id)))
+    return float(sum(float(m.values[name]) for m in mechanisms
+                     for name in (CATALOG[m.id].time_parameter_names() if m.id in CATALOG else ())))
 
 
 def _start_f_n_hz(damping: float, delay_s: float) -> float:

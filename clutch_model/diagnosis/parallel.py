@@ -190,7 +190,7 @@ class FitExecutor:
         ranked = sorted(rem, key=lambda c: _train_mse(fits[c.id], train))
         for c in ranked[: self.refine_top]:
             self._submit(("refine", c.id) + phase, refine_job, c.context, c.id, c.refine_bases(train),
-                         fits[c.id].parameters, train.mask)
+                         fits[c.id].parameters, train.mask, fits[c.id].fit.co_parameters)
 
     def note_fit(self, cand, train, fitted):
         """The ModelFit a candidate returned for a selection step (for the refit prefetch)."""
@@ -206,11 +206,12 @@ class FitExecutor:
         phase = self._phase(train)
         key = ("refine", cand.id) + phase
         if key in self._pending and self._pending_start_ok(fitted, train, phase, cand):
-            res = self._result(key, refine_job, cand.context, cand.id, bases, fitted.parameters, train.mask)
+            res = self._result(key, refine_job, cand.context, cand.id, bases, fitted.parameters, train.mask,
+                               fitted.fit.co_parameters)
         else:
             self._pending.pop(key, None)
             res = self._result(("refine-now", cand.id) + phase, refine_job, cand.context, cand.id, bases,
-                               fitted.parameters, train.mask)
+                               fitted.parameters, train.mask, fitted.fit.co_parameters)
         on_top = f" on top of {', '.join(train.selected)}" if train.selected else ""
         self._tick(("refine",) + phase, min(self.refine_top, len(self._remaining(train))), f"refits{on_top}")
         return res
@@ -219,4 +220,5 @@ class FitExecutor:
         """The prefetched refit started from the same first fit selection passes now."""
         fits = getattr(self, "_fits_done", {}).get(phase, {})
         f = fits.get(cand.id)
-        return f is not None and f.parameters == fitted.parameters
+        return (f is not None and f.parameters == fitted.parameters
+                and f.fit.co_parameters == fitted.fit.co_parameters)

@@ -14,6 +14,13 @@ from clutch_model.diagnosis import features as F
 from clutch_model.diagnosis.engine import Diagnosis
 
 
+def _co_fitted(fitted) -> dict:
+    """{"co_fitted": {mech_id: {parameter: value}}} of the causes already in the model that a
+    candidate's fit moved with its own parameters (fitting.co_fitted_ids), or {}."""
+    co = getattr(getattr(fitted, "fit", None), "co_parameters", None)
+    return {"co_fitted": dict(co)} if co else {}
+
+
 def report_dict(d: Diagnosis) -> dict:
     cand = []
     for sc in d.scores:
@@ -33,6 +40,7 @@ def report_dict(d: Diagnosis) -> dict:
                                   "held_out_p": sc.comparison.p_value,
                                   "innovation_variance_cut": sc.comparison.gain_frac,
                                   "parameters": sc.fitted.parameters,
+                                  **_co_fitted(sc.fitted),
                                   **({"against_twin": {"held_out_t": sc.own.t_stat,
                                                        "plain_gain_frac": sc.own.plain_gain_frac,
                                                        "held_out_pieces_rmse_nm": sc.own_pieces}}

@@ -2,7 +2,8 @@
 
 Many runs: whole runs are held out (every third from the second, in log-time order, moved off
 the runs that hold an extreme of the campaign's slip or sump temperature, so validation stays
-inside the fit runs' operating envelope). Few runs (one long drive, two bags): time spans are
+inside the fit runs' operating envelope; of three runs, the one whose sump temperature lies
+between the other two's). Few runs (one long drive, two bags): time spans are
 held out instead, every third span of each run from the second. Either way the simulation runs
 through every bag from its start (state carried through the spans); only the rows that are
 scored differ. A short guard after each change between fitted and held-out rows is scored by
@@ -110,7 +111,16 @@ class Split:
 
 def _whole_run_picks(runs) -> list:
     n = len(runs)
-    picks = [n // 2] if n == 3 else list(range(1, n, 3))
+    if n == 3:
+        # the run whose sump temperature is between the other two: the friction correction is
+        # quadratic in temperature and extrapolates off the fit runs' range. Measured on an
+        # actuator lag + transport delay campaign (three 30 s runs at 78, 36 and 59 C, AR(1) 0.9
+        # torque noise): with the middle run in log time (the coldest) held out, the calibrated
+        # model's held-out RMSE was 151 N*m against the nominal's 74, and a friction fall with
+        # dissipated energy found beyond the catalog (t = 15.1) patched that extrapolation
+        sump = [float(np.mean(r.sump_temperature_c)) for r in runs]
+        return [int(np.argsort(sump)[1])]
+    picks = list(range(1, n, 3))
     if n >= 4:
         slip = np.array([float(np.mean(np.abs(r.slip_speed_rad_s))) for r in runs])
         sump = np.array([float(np.mean(r.sump_temperature_c)) for r in runs])
@@ -137,9 +147,10 @@ def choose_split(runs, held_out=None, min_runs_whole: int = MIN_RUNS_WHOLE, guar
         return Split([parse_held_out(str(h)) for h in held_out], guard_s, "given")
     if len(runs) >= min_runs_whole:
         picks = _whole_run_picks(runs)
-        return Split([HeldOut(runs[k].name) for k in picks], guard_s,
-                     "whole runs: every third from the second in log-time order, moved off the runs with the "
-                     "campaign's extreme slip or sump temperature")
+        how = ("whole runs: the run whose sump temperature is between the other two's" if len(runs) == 3 else
+               "whole runs: every third from the second in log-time order, moved off the runs with the "
+               "campaign's extreme slip or sump temperature")
+        return Split([HeldOut(runs[k].name) for k in picks], guard_s, how)
     total = sum(max(r.duration_s, 0.0) for r in runs)
     span = min(max(total / TARGET_SPANS, MIN_SPAN_S), MAX_SPAN_S)
     held = []

@@ -23,7 +23,8 @@ def add_parser(sub):
     add_params_option(p)
     p.add_argument("--held-out", nargs="+", metavar="RUN", default=None,
                    help="bags to hold out, whole ('BAG') or a time span in s from the bag's first message "
-                        "('BAG[t0:t1]') (default: every third run from the second, or time spans of few long runs)")
+                        "('BAG[t0:t1]') (default: every third run from the second, of 3 runs the one between the "
+                        "others in sump temperature, or time spans of few long runs)")
     p.add_argument("--candidates", nargs="+", metavar="ID", default=None,
                    help="mechanism ids to consider (default: the whole catalog)")
     p.add_argument("--mc-samples", type=int, default=200,

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from clutch_model.diagnosis.engine import smooth_sump
-from clutch_model.diagnosis.fitting import fit_candidate, search_space, start_shift
+from clutch_model.diagnosis.fitting import co_fitted_ids, fit_candidate, search_space, start_shift
 from clutch_model.discovery.synthetic import _campaign_from
 from clutch_model.formats.bag_reader import Campaign
 from clutch_model.plant.mechanisms import make_mechanism
@@ -68,3 +68,39 @@ def test_start_shift_moves_only_starts_at_zero():
     assert shift[0] == pytest.approx(4.0)
     assert shift[1] == 0.0 and shift[2] == 0.0
     assert not start_shift(np.array([3.0, np.log(0.05)]), specs).any()
+
+
+def test_a_time_mechanism_on_top_of_another_moves_it_back():
+    """A lag fitted alone on a lag + delay takes up their sum; a delay fitted on top of it
+    moves the lag back with it (fitting.co_fitted_ids) and both reach the truth. Fitted on top
+    of the lag as it was, the delay alone only adds delay."""
+    model, campaign = _inputs_fine()
+    truth = model.with_mechanisms([make_mechanism("actuator_lag", tau_s=0.08),
+                                   make_mechanism("transport_delay", delay_s=0.04)])
+    campaign = _measured(campaign, predict_campaign(truth, campaign, energy0_j=0.0).torque_nm)
+    scale = float(np.nanpercentile(np.abs(campaign.torque_measured), 95))
+    mask = np.ones(campaign.t.size, bool)
+    lag_alone = fit_candidate(model, campaign, mask, "actuator_lag", 1e6, scale, fit_friction=False)
+    assert lag_alone.parameters["tau_s"] > 0.1            # the sum taken up (the test's premise)
+    on_top = lag_alone.model
+    assert co_fitted_ids("transport_delay", on_top) == ("actuator_lag",)
+    assert co_fitted_ids("drag_torque", on_top) == ()     # a torque map moves nothing with it
+    fit = fit_candidate(on_top, campaign, mask, "transport_delay", 1e6, scale, fit_friction=False)
+    assert fit.parameters["delay_s"] == pytest.approx(0.04, rel=0.05)
+    assert fit.co_parameters["actuator_lag"]["tau_s"] == pytest.approx(0.08, rel=0.05)
+    by_id = {m.id: m.values for m in fit.model.mechanisms}
+    assert by_id["actuator_lag"]["tau_s"] == pytest.approx(0.08, rel=0.05)
+    assert fit.fit_rmse_nm < 0.1 * lag_alone.fit_rmse_nm
+    # and the refit with the friction correction, started from there, stays there
+    joint = fit_candidate(on_top, campaign, mask, "transport_delay", 1e6, scale, fit_friction=True,
+                          noise_sigma_nm=1.0, start=fit.parameters, co_start=fit.co_parameters)
+    assert joint.parameters["delay_s"] == pytest.approx(0.04, rel=0.05)
+    assert joint.co_parameters["actuator_lag"]["tau_s"] == pytest.approx(0.08, rel=0.05)
+
+
+def _inputs_fine():
+    """Step force profiles at 200 Hz (a lag and a delay of tens of ms told apart)."""
+    spec = CampaignSpec(seed=7, n_runs=3, run_duration_s=4.0, rate_hz=200.0, friction_spread=0.0)
+    model = load_model(None)
+    campaign, _ = _campaign_from(synthesize_campaign(spec, base_model=model), 0.0, np.random.default_rng(0))
+    return model, smooth_sump(campaign)

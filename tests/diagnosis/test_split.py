@@ -89,3 +89,17 @@ def test_given_labels_and_bad_input():
         parse_held_out("run_00[10:5]")
     with pytest.raises(DataError):
         choose_split(runs, held_out=["run_00"]).masks(["run_00"], idx, t)
+
+
+def test_three_runs_hold_out_the_one_between_the_others_in_temperature():
+    """Of three runs, the held-out one lies inside the fit runs' sump temperature range (the
+    friction correction, quadratic in temperature, is not scored off the range it was fitted
+    on), whatever its place in log time."""
+    runs = _runs(3, 10.0)
+    for sumps, expected in (((78.0, 36.0, 59.0), "run_02"), ((40.0, 50.0, 60.0), "run_01"),
+                            ((55.0, 90.0, 30.0), "run_00")):
+        for r, th in zip(runs, sumps):
+            r.sump_temperature_c = np.full(r.t.size, th)
+        split = choose_split(runs)
+        assert split.labels == [expected]
+        assert split.fit_runs([r.name for r in runs]) == [r.name for r in runs if r.name != expected]

@@ -117,6 +117,11 @@ class Mechanism:
         return tuple(p.name for p in cls.parameters)
 
     @classmethod
+    def time_parameter_names(cls) -> tuple:
+        """Its parameters in seconds (a delay, a lag): a mechanism that acts in time."""
+        return tuple(p.name for p in cls.parameters if p.unit == "s")
+
+    @classmethod
     def magnitude_parameter(cls) -> str:
         """The parameter a single magnitude sets (the virtual car, the CLI's --magnitude)."""
         return cls.parameters[0].name
