@@ -94,6 +94,9 @@ def _virtual_campaign(tmp_path, **kw):
     return spec, sorted(str(p) for p in (tmp_path / "campaign" / "bags").iterdir())
 
 
+# acceptance-style (70 s on the 2-core machine): the rate rule, the decimation filter and the
+# decimated plant are checked by the tests above; `-m slow` runs it
+@pytest.mark.slow
 def test_a_1khz_car_log_is_decimated_and_diagnosed_right(tmp_path):
     """The car-log virtual test car (controller-like ramps, holds, releases; own clocks with
     jitter) with every topic at 1 kHz and a transport delay of 30 ms: diagnose decimates (the

@@ -65,6 +65,9 @@ def test_truth_scoring_leaves_out_the_sensor_tail():
     assert measurement_tail_s(CarLogSpec()) == 0.0
 
 
+# acceptance-style (111 s on the 2-core machine, the slowest test of `make test`): the lock tail
+# itself is checked by the tests above; `-m slow` runs it
+@pytest.mark.slow
 def test_a_delay_longer_than_the_lock_pad_is_named_at_its_size(tmp_path):
     """A 0.3 s transport delay (a slow bus) with lock-up phases: the measured torque shows each
     lock phase's driveline torque for 0.3 s after it, longer than the lock pad (0.2 s). The
