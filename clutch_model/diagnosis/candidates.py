@@ -15,7 +15,8 @@ from functools import cached_property
 
 import numpy as np
 
-from clutch_model.diagnosis.fitting import CampaignObjective, CandidateFit, fit_candidate, search_space
+from clutch_model.diagnosis.fitting import (CampaignObjective, CandidateFit, fit_candidate, search_space,
+                                            time_parameter_names)
 from clutch_model.plant.mechanisms import CATALOG
 from clutch_model.diagnosis.input_hold import _samples, high_frequency_noise
 from clutch_model.diagnosis.selection import ParameterSensitivity, SelectionData, TrainingSet, row_interval_s
@@ -128,7 +129,7 @@ class ModelFit:
         if self.id == "baseline":
             return
         for mech_id, values in [(self.id, self.fit.parameters), *self.fit.co_parameters.items()]:
-            for name in CATALOG[mech_id].time_parameter_names() if mech_id in CATALOG else ():
+            for name in time_parameter_names(mech_id):
                 yield mech_id, name, values.get(name)
 
     @property

@@ -93,9 +93,15 @@ class CandidateFit:
                                                         # of the base refitted with it (co_fitted_ids)
 
 
+def time_parameter_names(mech_id: str) -> tuple:
+    """The catalog mechanism's parameters in seconds (a delay, a lag); () for an id outside the
+    catalog."""
+    return CATALOG[mech_id].time_parameter_names() if mech_id in CATALOG else ()
+
+
 def time_mechanism_ids(ids) -> list:
     """The ids among ``ids`` whose catalog mechanism acts in time (a parameter in seconds)."""
-    return [i for i in ids if i in CATALOG and CATALOG[i].time_parameter_names()]
+    return [i for i in ids if time_parameter_names(i)]
 
 
 def co_fitted_ids(mech_id: str | None, base: ClutchModel) -> tuple:

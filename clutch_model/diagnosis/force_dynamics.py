@@ -24,8 +24,9 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numba import njit
 
-from clutch_model.diagnosis.fitting import N_CORR, CampaignObjective, solve_from, time_mechanism_ids
-from clutch_model.plant.mechanisms import CATALOG, ParamSpec
+from clutch_model.diagnosis.fitting import (N_CORR, CampaignObjective, solve_from, time_mechanism_ids,
+                                            time_parameter_names)
+from clutch_model.plant.mechanisms import ParamSpec
 from clutch_model.plant.params import ClutchModel
 from clutch_model.prediction import predict_campaign
 
@@ -76,8 +77,7 @@ def second_order_force(t, force, run_start, f_n_hz, damping, max_substep_s=MAX_S
 
 def group_delay_s(mechanisms) -> float:
     """The low-frequency delay the time mechanisms give the torque (their seconds summed)."""
-    return float(sum(float(m.values[name]) for m in mechanisms
-                     for name in (CATALOG[m.id].time_parameter_names() if m.id in CATALOG else ())))
+    return float(sum(float(m.values[name]) for m in mechanisms for name in time_parameter_names(m.id)))
 
 
 def _start_f_n_hz(damping: float, delay_s: float) -> float:
