@@ -36,6 +36,9 @@ def report_dict(d: Diagnosis) -> dict:
     for k, st in enumerate(sel.steps if sel else []):
         steps.append({"step": k + 1, "chosen": st.chosen, "look_ahead": st.look_ahead, "replaced_by": st.replaced_by,
                       "lookalikes": st.lookalikes,
+                      "parted_in_plain_squares": {k: {"t": v.t_stat, "p": v.p_value, "blocks": v.n_blocks,
+                                                      "mean_square_cut": v.cut_frac}
+                                                  for k, v in st.parted_in_plain_squares.items()},
                       "scores": [{"id": sc.id, "held_out_t": sc.comparison.t_stat,
                                   "held_out_p": sc.comparison.p_value,
                                   "innovation_variance_cut": sc.comparison.gain_frac,

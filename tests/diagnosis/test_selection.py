@@ -744,3 +744,55 @@ def test_gain_over_the_twin_must_hold_on_most_held_out_pieces(monkeypatch):
     monkeypatch.setattr(S, "piece_rmse", two_of_three_worse)
     sel = select_causes(_data(y, d, names, X, train, test, groups), Zero(), [cand])
     assert sel.verdict != "named" and "slip_power" not in sel.cause_ids, sel.reason
+
+
+@dataclass
+class _LagFit:
+    """A fitted time mechanism as the selection sees it: its residual, one time parameter (and
+    any co-fitted ones), the friction correction refitted with it (joint, 10 coefficients)."""
+    id: str
+    resid: np.ndarray
+    dynamic: bool = True
+    co: dict = None
+
+    @property
+    def parameters(self):
+        return {"tau_s": 0.05}
+
+    @property
+    def fit(self):
+        from types import SimpleNamespace
+        return SimpleNamespace(parameters=self.parameters, co_parameters=self.co or {}, joint=True,
+                               friction_correction=np.zeros(10))
+
+    def predict(self, data):
+        return data.y - self.resid
+
+
+def test_dynamic_rivals_of_one_dimension_are_parted_in_plain_squares():
+    """An actuator lag and a torque-sensor lag differ in the shape of the torque's edges, a few
+    N*m against 8 N*m of noise; where the whitened held-out errors cannot part them, the plain
+    squares over every row do (both moved as many parameters on the same training rows), when
+    the held-out rows agree. Not for rivals of another dimension, static ones, one whose
+    held-out error is the larger, or a difference within the noise."""
+    from clutch_model.diagnosis.selection import dynamic_dimensions, fitted_dimension, plainly_better
+
+    d, names, X, train, test, cols, eps, groups = _campaign(7, "ar1_095")
+    data = _data(eps, d, names, X, train, test, groups)
+    edges = np.convolve(np.diff(d["force"], prepend=d["force"][0]), np.ones(10) / 10, mode="same")
+    misfit = 2.5 * edges / np.std(edges)                 # the wrong lag's error: 2.5 N*m rms at the edges
+    right, wrong = _LagFit("actuator_lag", eps), _LagFit("torque_sensor_lag", eps + misfit)
+    assert plainly_better(data, wrong.resid, right.resid, *dynamic_dimensions(wrong, right))
+    assert not plainly_better(data, right.resid, wrong.resid, *dynamic_dimensions(right, wrong))
+    # the held-out rows favour the other: no decision
+    held_wrong = _LagFit("torque_sensor_lag", eps + np.where(test, 0.0, misfit))
+    held_right = _LagFit("actuator_lag", eps + np.where(test, 0.5 * misfit, 0.0))
+    assert not plainly_better(data, held_wrong.resid, held_right.resid, *dynamic_dimensions(held_wrong, held_right))
+    # another dimension (a delay co-fitted), a static rival, noise alone
+    co = _LagFit("actuator_lag", eps, co={"transport_delay": {"delay_s": 0.04}})
+    assert fitted_dimension(co) == fitted_dimension(right) + 1
+    assert not plainly_better(data, wrong.resid, co.resid, *dynamic_dimensions(wrong, co))
+    assert dynamic_dimensions(wrong, _LagFit("torque_offset", eps, dynamic=False)) == (None, None)
+    assert not plainly_better(data, wrong.resid, right.resid, None, None)
+    other_noise = make_noise("ar1_095", d["run_start"], SIGMA_NM, 99, rate_hz=200)
+    assert not plainly_better(data, eps, other_noise, *dynamic_dimensions(right, _LagFit("torque_sensor_lag", other_noise)))
