@@ -21,6 +21,11 @@ def _co_fitted(fitted) -> dict:
     return {"co_fitted": dict(co)} if co else {}
 
 
+def _plain_squares(test) -> dict:
+    """A plain-squares block test (structure_test.PlainCrossFit) as report.json shows it."""
+    return {"t": test.t_stat, "p": test.p_value, "blocks": test.n_blocks, "mean_square_cut": test.cut_frac}
+
+
 def report_dict(d: Diagnosis) -> dict:
     cand = []
     for sc in d.scores:
@@ -36,9 +41,8 @@ def report_dict(d: Diagnosis) -> dict:
     for k, st in enumerate(sel.steps if sel else []):
         steps.append({"step": k + 1, "chosen": st.chosen, "look_ahead": st.look_ahead, "replaced_by": st.replaced_by,
                       "lookalikes": st.lookalikes,
-                      "parted_in_plain_squares": {k: {"t": v.t_stat, "p": v.p_value, "blocks": v.n_blocks,
-                                                      "mean_square_cut": v.cut_frac}
-                                                  for k, v in st.parted_in_plain_squares.items()},
+                      "parted_in_plain_squares": {rival: _plain_squares(test)
+                                                  for rival, test in st.parted_in_plain_squares.items()},
                       "scores": [{"id": sc.id, "held_out_t": sc.comparison.t_stat,
                                   "held_out_p": sc.comparison.p_value,
                                   "innovation_variance_cut": sc.comparison.gain_frac,
@@ -55,8 +59,7 @@ def report_dict(d: Diagnosis) -> dict:
         out = {"structured": st.structured, "held_out_t": st.comparison.t_stat, "held_out_p": st.p_value,
                "innovation_variance_cut": st.gain_frac, "follows": st.top_features(3)}
         if st.plain is not None:
-            out["cross_fit_plain"] = {"t": st.plain.t_stat, "p": st.plain.p_value, "blocks": st.plain.n_blocks,
-                                      "mean_square_cut": st.plain.cut_frac}
+            out["cross_fit_plain"] = _plain_squares(st.plain)
         return out
 
     cause = {"id": d.cause_id, "evidence": d.evidence, "parameters": d.cause_parameters,

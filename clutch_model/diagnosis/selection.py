@@ -504,13 +504,14 @@ def _swap_check(data, baseline, named, steps, cand_by_id, current, without, alph
             # two time mechanisms in the cause's place, as many parameters in all: plain squares
             dynamic = getattr(cause.fitted, "dynamic", False) and getattr(fitted_r, "dynamic", False)
             plain_dims = (causes_dimension(named), causes_dimension(causes_r)) if dynamic else (None, None)
-            plain = None if _beats(back, lookalike_alpha) else plainly_better(data, resid_full, resid_r, *plain_dims)
-            if _takes_the_name(head, lookalike_alpha) or plain is not None:
+            takes = _takes_the_name(head, lookalike_alpha)
+            plain = None if takes or _beats(back, lookalike_alpha) else plainly_better(data, resid_full, resid_r,
+                                                                                        *plain_dims)
+            if takes or plain is not None:
                 for c in causes_r:
                     old = next((n for n in named if n.id == c.id), None)
                     c.comparison = old.comparison if old is not None else holds
-                how = (f"t = {head.t_stat:.1f}" if plain is None or _takes_the_name(head, lookalike_alpha)
-                       else f"in plain squares over every row, t = {plain.t_stat:.1f}")
+                how = f"t = {head.t_stat:.1f}" if takes else f"in plain squares over every row, t = {plain.t_stat:.1f}"
                 swaps.append(f"{rival} replaces {cause.id}: with {', '.join(others)} in the model it predicts the "
                              f"held-out residual better ({how}, plain RMSE {head.rmse_alt:.2f} "
                              f"against {head.rmse_null:.2f} N·m)")
@@ -537,11 +538,7 @@ def static_dimension(fitted) -> int | None:
     """How many parameters a candidate's fit moved on the training rows -- its mechanism's, and
     the friction correction's when it was refitted jointly -- when its mechanism is static (a
     torque map: no time parameter, ``fitted.dynamic`` False); None otherwise or not known."""
-    fit = getattr(fitted, "fit", None)
-    params = getattr(fit, "parameters", None)
-    if fit is None or params is None or getattr(fitted, "dynamic", True):
-        return None
-    return len(params) + _refitted_friction_size(fit)
+    return None if getattr(fitted, "dynamic", True) else fitted_dimension(fitted)
 
 
 def head_to_head(data: SelectionData, null_fitted, alt_fitted, max_order, resid_null=None, resid_alt=None):
