@@ -225,8 +225,9 @@ class ProgressiveReport:
     calibrated model until a cause is named, a report.json with ``status``), then the whole
     report. Ctrl-C keeps what was written."""
 
-    def __init__(self, out_dir):
+    def __init__(self, out_dir, plots: bool = True):
         self.out = Path(out_dir)
+        self.plots = plots
         self.out.mkdir(parents=True, exist_ok=True)
         self.partial = {"status": "started"}
 
@@ -247,10 +248,12 @@ class ProgressiveReport:
                         "clutch-sim diagnose: extended model (= the calibrated model until a cause is named)")
             self._partial("calibrated; naming causes", rmse_nm=dict(kw["rmse"]), calibration=kw.get("info", {}))
         elif stage == "selected":
-            write_report(kw["diagnosis"], self.out)
+            write_report(kw["diagnosis"], self.out, plots=self.plots)
 
 
-def write_report(d: Diagnosis, out_dir) -> dict:
+def write_report(d: Diagnosis, out_dir, plots: bool = True) -> dict:
+    """report.json, both models and report.html, with the figures unless ``plots`` is False
+    (drawing them is about a fifth of a short diagnosis)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     rep = report_dict(d)
@@ -260,7 +263,7 @@ def write_report(d: Diagnosis, out_dir) -> dict:
                 f"clutch-sim diagnose: extended model, cause = {d.cause_id}"
                 + (f" ({', '.join(c['id'] for c in d.causes)})" if len(d.causes) > 1 else ""))
     _write_text(out / "report.json", json.dumps(jsonable(rep), indent=2, allow_nan=False) + "\n")
-    files = _plots(d, out)
+    files = _plots(d, out) if plots else []
     _write_text(out / "report.html", _html(d, rep, files))
     return rep
 
@@ -299,7 +302,7 @@ def _html(d: Diagnosis, rep: dict, files) -> str:
     rows = "".join(rows)
     r = rep["rmse_nm"]
     imgs = "".join(f"<figure><img src='{e(f)}' alt='{e(cap)}'><figcaption>{e(cap)}</figcaption></figure>"
-                   for f, cap in files)
+                   for f, cap in files) or "<p>(figures not drawn: diagnose --no-plots)</p>"
     return f"""<!doctype html><html><head><meta charset="utf-8"><title>clutch-sim diagnosis</title>
 <style>body{{font-family:sans-serif;max-width:1100px;margin:1em auto;color:#222}}
 .verdict{{font-size:1.5em;padding:.5em;background:#eef5ee;border-left:6px solid #2a2}}

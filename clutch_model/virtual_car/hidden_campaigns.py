@@ -406,9 +406,10 @@ class CheckResult:
 
 
 def check_campaign(camp: HiddenCampaign, work_dir=None, mc_samples: int | None = None,
-                   timeout_s: float | None = None, stamps: bool = True) -> CheckResult:
+                   timeout_s: float | None = None, stamps: bool = True, plots: bool = False) -> CheckResult:
     """``clutch-sim diagnose`` on the seen bags, then both models replayed on every bag and
-    scored on the unseen ones against the true torque (see the module docstring)."""
+    scored on the unseen ones against the true torque (see the module docstring). ``plots``:
+    let diagnose draw its figures (``--no-plots`` otherwise: they are not scored)."""
     work = Path(work_dir) if work_dir is not None else camp.root
     res = CheckResult(cell=f"{camp.case.name}@{camp.condition.name}#{camp.seed}", case=camp.case.name,
                       condition=camp.condition.name, condition_class=camp.condition.klass, seed=camp.seed,
@@ -418,6 +419,8 @@ def check_campaign(camp: HiddenCampaign, work_dir=None, mc_samples: int | None =
     res.wall_s["synth"] = camp.synth_s
     diag = work / "diag"
     args = ["diagnose", "--bench", camp.bench_csv, "--bags", *camp.seen_bags, "--out", diag]
+    if not plots:
+        args.append("--no-plots")
     if mc_samples is not None:
         args += ["--mc-samples", int(mc_samples)]
     rc, err, wall, cpu = run_clutch_sim(args, timeout_s)

@@ -45,6 +45,8 @@ def add_parser(sub):
                         "'local' (a 2-worker LocalCluster on this machine); default: in this process. "
                         "The results equal the serial run's")
     p.add_argument("--no-progress", action="store_true", help="no progress bars on stderr (stage lines stay)")
+    p.add_argument("--no-plots", action="store_true",
+                   help="write report.html without the PNG figures (faster when diagnosing many campaigns)")
     add_topic_options(p)
     p.set_defaults(func=run)
 
@@ -88,7 +90,7 @@ def run(args) -> int:
     def calibrate(model, fit_campaign):
         return car_calibration(model, fit_campaign, mc_samples=args.mc_samples, seed=args.seed, progress=say)
 
-    writer = ProgressiveReport(args.out)      # each output written as soon as it is known
+    writer = ProgressiveReport(args.out, plots=not args.no_plots)      # each output written as soon as it is known
     with FitExecutor(args.scheduler, progress=not args.no_progress, say=say) as executor:
         held = [runs]
         del runs                  # the engine's reference only: the native rows are freed once decimated

@@ -148,6 +148,8 @@ def _check(tmp_path, condition, case, seed):
     what = (f"{case} under {condition} (hidden {camp.spec.mechanisms or camp.spec.effects}): expected "
             f"{camp.expected_label}, diagnose said {res.named_label}: {evidence}")
     assert res.verdict not in ("refused", "error", "timeout"), what
+    # diagnosed with --no-plots: the report without figures
+    assert "<img" not in (tmp_path / "diag" / "report.html").read_text() and not list((tmp_path / "diag").glob("*.png"))
     assert res.judgement == "ok", what
     cal, ext = res.replay_rmse_nm["calibrated"], res.replay_rmse_nm["extended"]
     if res.named:

@@ -42,6 +42,9 @@ def run_diagnose(tmp_path, k, **spec_kw):
     report = json.loads((out / "report.json").read_text())
     for name in ("report.html", "calibrated_model.yaml", "extended_model.yaml"):
         assert (out / name).exists()
+    html = (out / "report.html").read_text()
+    for name in ("torque_held_out.png", "residuals.png", "lag_hysteresis_drift.png", "candidates.png"):
+        assert (out / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and f"src='{name}'" in html
     return spec, report
 
 

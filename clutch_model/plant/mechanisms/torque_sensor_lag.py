@@ -37,15 +37,14 @@ def lowpass_signal(t, u, run_start, tau_s, hold: bool = False):
     x = np.where(dt > 0, dt / tau_s, 0.0)
     a = np.exp(-x)
     c = np.where(x > 0, -np.expm1(-x) / np.where(x > 0, x, 1.0), 1.0)
-    uu = u.T                       # time first: rows are samples
-    y = np.empty_like(uu)
+    from clutch_model.plant.measurement_kernels import lowpass_held, lowpass_linear
+
+    traces = np.ascontiguousarray(u.reshape(-1, t.size))     # one trace per row
+    y = np.empty_like(traces)
     for lo, hi in run_bounds(run_start, t.size):
-        y[lo] = uu[lo]
-        for k in range(lo, hi - 1):
-            if dt[k] <= 0.0:
-                y[k + 1] = y[k]
-            elif hold:
-                y[k + 1] = uu[k] + a[k] * (y[k] - uu[k])
+        for u_run, y_run in zip(traces[:, lo:hi], y[:, lo:hi]):
+            if hold:
+                lowpass_held(u_run, dt[lo:hi - 1], a[lo:hi - 1], u_run[0], y_run)
             else:
-                y[k + 1] = uu[k + 1] + a[k] * (y[k] - uu[k]) - c[k] * (uu[k + 1] - uu[k])
-    return y.T.copy() if u.ndim > 1 else y
+                lowpass_linear(u_run, dt[lo:hi - 1], a[lo:hi - 1], c[lo:hi - 1], u_run[0], y_run)
+    return y.reshape(u.shape)
