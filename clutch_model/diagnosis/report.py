@@ -12,6 +12,7 @@ from clutch_model.formats.results import jsonable
 from clutch_model.plant.params import save_model
 from clutch_model.diagnosis import features as F
 from clutch_model.diagnosis.engine import Diagnosis
+from clutch_model.diagnosis.structure_test import EncompassingTest
 
 
 def _co_fitted(fitted) -> dict:
@@ -24,6 +25,12 @@ def _co_fitted(fitted) -> dict:
 def _plain_squares(test) -> dict:
     """A plain-squares block test (structure_test.PlainCrossFit) as report.json shows it."""
     return {"t": test.t_stat, "p": test.p_value, "blocks": test.n_blocks, "mean_square_cut": test.cut_frac}
+
+
+def _encompassing(test) -> dict:
+    """An encompassing test (structure_test.EncompassingTest) as report.json shows it."""
+    return {"t": test.t_stat, "p": test.p_value, "blocks": test.n_blocks, "weight": test.weight,
+            "noise_order": test.noise_order}
 
 
 def report_dict(d: Diagnosis) -> dict:
@@ -41,8 +48,10 @@ def report_dict(d: Diagnosis) -> dict:
     for k, st in enumerate(sel.steps if sel else []):
         steps.append({"step": k + 1, "chosen": st.chosen, "look_ahead": st.look_ahead, "replaced_by": st.replaced_by,
                       "lookalikes": st.lookalikes,
-                      "parted_in_plain_squares": {rival: _plain_squares(test)
-                                                  for rival, test in st.parted_in_plain_squares.items()},
+                      "parted_in_plain_squares": {rival: _plain_squares(test) for rival, test in st.parted.items()
+                                                  if not isinstance(test, EncompassingTest)},
+                      "parted_by_encompassing": {rival: _encompassing(test) for rival, test in st.parted.items()
+                                                 if isinstance(test, EncompassingTest)},
                       "scores": [{"id": sc.id, "held_out_t": sc.comparison.t_stat,
                                   "held_out_p": sc.comparison.p_value,
                                   "innovation_variance_cut": sc.comparison.gain_frac,

@@ -796,3 +796,34 @@ def test_dynamic_rivals_of_one_dimension_are_parted_in_plain_squares():
     assert not plainly_better(data, wrong.resid, right.resid, None, None)
     other_noise = make_noise("ar1_095", d["run_start"], SIGMA_NM, 99, rate_hz=200)
     assert not plainly_better(data, eps, other_noise, *dynamic_dimensions(right, _LagFit("torque_sensor_lag", other_noise)))
+
+
+def test_dynamic_rivals_the_held_out_rows_side_with_are_parted_by_the_encompassing_test():
+    """Under torque noise held at 10 Hz the plain squares of a 0.5 N*m misfit at the torque's
+    edges (against 8 N*m of noise) fall short; the encompassing test, both residuals whitened by
+    the noise model of the residual between them, sides with the right lag, with the weight of
+    its prediction near 1, and never with the wrong one. A truth midway between the two
+    (weight 1/2) and rivals of another dimension get no decision."""
+    from clutch_model.diagnosis.selection import (dynamic_dimensions, encompasses, parts_rivals,
+                                                  plainly_better)
+    from clutch_model.diagnosis.structure_test import EncompassingTest
+
+    d, names, X, train, test, cols, eps, groups = _campaign(8, "held_10hz")
+    data = _data(eps, d, names, X, train, test, groups)
+    edges = np.convolve(np.diff(d["force"], prepend=d["force"][0]), np.ones(10) / 10, mode="same")
+    misfit = 0.5 * edges / np.std(edges)
+    right, wrong = _LagFit("torque_sensor_lag", eps), _LagFit("actuator_lag", eps + misfit)
+    dims = dynamic_dimensions(wrong, right)
+    assert plainly_better(data, wrong.resid, right.resid, *dims) is None          # the premise
+    got = parts_rivals(data, wrong.resid, right.resid, *dims, max_order=48)
+    assert isinstance(got, EncompassingTest) and got.t_stat > 3.0, got
+    assert got.weight == pytest.approx(1.0, abs=0.15), got
+    assert parts_rivals(data, right.resid, wrong.resid, *dims[::-1], max_order=48) is None
+    # the measured torque midway between the two predictions
+    a, b = _LagFit("actuator_lag", eps + 0.5 * misfit), _LagFit("torque_sensor_lag", eps - 0.5 * misfit)
+    assert encompasses(data, a.resid, b.resid, *dynamic_dimensions(a, b), max_order=48) is None
+    assert encompasses(data, b.resid, a.resid, *dynamic_dimensions(b, a), max_order=48) is None
+    # another dimension (a delay co-fitted with the right lag), or not known
+    co = _LagFit("torque_sensor_lag", eps, co={"transport_delay": {"delay_s": 0.04}})
+    assert encompasses(data, wrong.resid, co.resid, *dynamic_dimensions(wrong, co), max_order=48) is None
+    assert encompasses(data, wrong.resid, right.resid, None, None, max_order=48) is None
