@@ -19,6 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from clutch_model.plant.mechanisms import ordered
+from clutch_model.plant.mechanisms.torque_sensor_lag import lowpass_coefficients
 
 
 class _Offset:
@@ -57,11 +58,8 @@ class _SensorLag:
             tt, uu, y0 = t, u, u[0]
         else:
             tt, uu, y0 = np.concatenate([[self.last[0]], t]), np.concatenate([[self.last[1]], u]), self.last[2]
-        # coefficients as in torque_sensor_lag.lowpass_signal
         dt = np.diff(tt)
-        x = np.where(dt > 0, dt / self.tau, 0.0)
-        a = np.exp(-x)
-        c = np.where(x > 0, -np.expm1(-x) / np.where(x > 0, x, 1.0), 1.0)
+        a, c = lowpass_coefficients(dt, self.tau)
         y = np.empty_like(uu)
         _lowpass_linear(uu, dt, a, c, y0, y)
         self.last = (float(tt[-1]), float(uu[-1]), float(y[-1]))

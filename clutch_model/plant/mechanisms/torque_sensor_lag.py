@@ -21,6 +21,13 @@ class TorqueSensorLag(Mechanism):
         return lowpass_signal(t, torque, run_start, self.values["tau_s"])
 
 
+def lowpass_coefficients(dt: np.ndarray, tau_s: float) -> tuple:
+    """(a, c) of the first-order low-pass's exact steps dt (``lowpass_signal``): a = exp(-dt/tau),
+    c = (1 - a) tau/dt (1 where dt <= 0)."""
+    x = np.where(dt > 0, dt / tau_s, 0.0)
+    return np.exp(-x), np.where(x > 0, -np.expm1(-x) / np.where(x > 0, x, 1.0), 1.0)
+
+
 def lowpass_signal(t, u, run_start, tau_s, hold: bool = False):
     """First-order low-pass tau y' = u - y of each run, y = u at the run's first row.
 
@@ -34,9 +41,7 @@ def lowpass_signal(t, u, run_start, tau_s, hold: bool = False):
     if tau_s <= 0.0:
         return u.copy()
     dt = np.diff(t)
-    x = np.where(dt > 0, dt / tau_s, 0.0)
-    a = np.exp(-x)
-    c = np.where(x > 0, -np.expm1(-x) / np.where(x > 0, x, 1.0), 1.0)
+    a, c = lowpass_coefficients(dt, tau_s)
     from clutch_model.plant.measurement_kernels import lowpass_held, lowpass_linear
 
     traces = np.ascontiguousarray(u.reshape(-1, t.size))     # one trace per row
