@@ -424,7 +424,10 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
         split = choose_split(full.runs, held_out)          # the given spans, row by row
         fit_mask, eval_mask = split.masks(names, S.source_index(campaign, names), campaign.t)
     else:
-        split = choose_split(campaign.runs, held_out)
+        # the bench model's pack temperature: the split keeps the held-out runs off its extremes
+        bench_rep = replay_runs(bench_model, campaign)
+        pack = [bench_rep.sim.pack_temperature_c[sl] for _, sl in campaign.slices()]
+        split = choose_split(campaign.runs, held_out, pack_temperature_c=pack)
         fit_mask, eval_mask = split.masks(names, campaign.run_index, campaign.t)
     scored = np.isfinite(campaign.torque_measured)
     if not (eval_mask & scored).any():
@@ -443,7 +446,6 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
     # -- stage 2: calibrate -----------------------------------------------------------------
     if sampled is None:
         nominal_pred = replay_runs(nominal, campaign).torque_sim
-        bench_rep = replay_runs(bench_model, campaign)
         bench_pred = bench_rep.torque_sim
         energy_total = float(bench_rep.sim.energy_j[-1])
     else:

@@ -103,3 +103,27 @@ def test_three_runs_hold_out_the_one_between_the_others_in_temperature():
         split = choose_split(runs)
         assert split.labels == [expected]
         assert split.fit_runs([r.name for r in runs]) == [r.name for r in runs if r.name != expected]
+
+
+def test_many_runs_hold_out_a_run_inside_the_fit_runs_pack_temperature_range():
+    """With four runs or more the held-out run is moved off the hottest and coldest run by the
+    predicted pack temperature (the friction law's temperature) before any slip or sump
+    extreme: a held-out run hotter than every fit run would score the calibration's
+    extrapolation, not the model."""
+    runs = _runs(4, 10.0)
+    # slip and sump: run_00 and run_03 hold every extreme, run_01 and run_02 none
+    for r, (slip, sump) in zip(runs, ((2.0, 30.0), (5.0, 50.0), (5.0, 50.0), (9.0, 70.0))):
+        r.slip_speed_rad_s = np.full(r.t.size, slip)
+        r.sump_temperature_c = np.full(r.t.size, sump)
+    assert choose_split(runs).labels == ["run_01"]                   # no pack temperature: as before
+    hot = [np.full(r.t.size, th) for r, th in zip(runs, (50.0, 95.0, 70.0, 60.0))]
+    assert choose_split(runs, pack_temperature_c=hot).labels == ["run_02"]   # run_01 is the hottest
+    # a run peaking highest counts as the hot end too, whatever its mean
+    peak = [np.linspace(th - d, th + d, r.t.size) for r, th, d in zip(runs, (60.0, 62.0, 64.0, 66.0),
+                                                                          (5.0, 40.0, 5.0, 5.0))]
+    assert choose_split(runs, pack_temperature_c=peak).labels == ["run_02"]
+    # run_00, run_01, run_02 each an end of the pack temperature: run_03 (a slip and sump
+    # extreme) is held out, a pack-temperature extreme weighing more
+    three = [np.linspace(th - d, th + d, r.t.size) for r, th, d in zip(runs, (40.0, 95.0, 60.0, 70.0),
+                                                                           (5.0, 5.0, 60.0, 5.0))]
+    assert choose_split(runs, pack_temperature_c=three).labels == ["run_03"]
