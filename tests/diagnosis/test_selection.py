@@ -746,6 +746,43 @@ def test_gain_over_the_twin_must_hold_on_most_held_out_pieces(monkeypatch):
     assert sel.verdict != "named" and "slip_power" not in sel.cause_ids, sel.reason
 
 
+def test_a_lock_phase_does_not_cut_a_held_out_run_into_pieces():
+    """The held-out pieces are held-out runs or spans: unscored rows inside one (a lock-up
+    phase) do not split it, fitted rows and run starts do."""
+    from clutch_model.diagnosis import selection as S
+
+    n = 400
+    t = np.arange(n) * 0.01
+    run_start = np.zeros(n, bool)
+    run_start[[0, 200]] = True
+    train = np.zeros(n, bool)
+    train[:200] = True                       # run 0 fitted
+    test = np.zeros(n, bool)
+    test[200:400] = True                     # run 1 held out ...
+    test[260:300] = False                    # ... with a lock phase, scored by neither
+    y = np.where(test | train, 0.0, np.nan)
+    data = S.SelectionData(y=y, t=t, run_start=run_start, train_mask=train, test_mask=test)
+    assert S.held_out_pieces(data) == [(200, 400)]
+    a = np.where(test, 1.0, 0.0)
+    b = np.where(test, 2.0, 0.0)
+    assert S.piece_rmse(data, a, b) == [[1.0, 2.0]]
+    # spans of one run held out between fitted rows are separate pieces
+    train2 = np.zeros(n, bool)
+    train2[:200] = True
+    train2[300:340] = True
+    test2 = np.zeros(n, bool)
+    test2[200:300] = True
+    test2[340:400] = True
+    data2 = S.SelectionData(y=np.zeros(n), t=t, run_start=run_start, train_mask=train2, test_mask=test2)
+    assert S.held_out_pieces(data2) == [(200, 300), (340, 400)]
+    # a run start ends a piece
+    test3 = np.zeros(n, bool)
+    test3[150:250] = True
+    train3 = ~test3
+    data3 = S.SelectionData(y=np.zeros(n), t=t, run_start=run_start, train_mask=train3, test_mask=test3)
+    assert S.held_out_pieces(data3) == [(150, 200), (200, 250)]
+
+
 @dataclass
 class _LagFit:
     """A fitted time mechanism as the selection sees it: its residual, one time parameter (and
