@@ -163,11 +163,11 @@ def choose_split(runs, held_out=None, min_runs_whole: int = MIN_RUNS_WHOLE, guar
         return Split([parse_held_out(str(h)) for h in held_out], guard_s, "given")
     if len(runs) >= min_runs_whole:
         picks = _whole_run_picks(runs, pack_temperature_c)
+        extremes = "pack temperature, slip or sump temperature" if pack_temperature_c is not None else \
+            "slip or sump temperature"
         how = ("whole runs: the run whose sump temperature is between the other two's" if len(runs) == 3 else
                "whole runs: every third from the second in log-time order, moved off the runs with the "
-               "campaign's extreme " + ("pack temperature, slip or sump temperature"
-                                                        if pack_temperature_c is not None and len(runs) >= 4
-                                                        else "slip or sump temperature"))
+               f"campaign's extreme {extremes}")
         return Split([HeldOut(runs[k].name) for k in picks], guard_s, how)
     total = sum(max(r.duration_s, 0.0) for r in runs)
     span = min(max(total / TARGET_SPANS, MIN_SPAN_S), MAX_SPAN_S)
