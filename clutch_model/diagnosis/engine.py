@@ -116,7 +116,7 @@ def choose_held_out(names: list, runs=None) -> list:
         n = len(names)
         picks = [n // 2] if n == 3 else list(range(1, n, 3))     # without the runs' data: by position
     else:
-        picks = _whole_run_picks(list(runs))
+        picks, _ = _whole_run_picks(list(runs))
     return [names[k] for k in picks]
 
 

@@ -110,7 +110,9 @@ class Split:
         return [n for n in names if n not in whole]
 
 
-def _whole_run_picks(runs, pack_temperature_c=None) -> list:
+def _whole_run_picks(runs, pack_temperature_c=None) -> tuple:
+    """The indices of the held-out runs, and whether the pack temperature's extremes moved
+    them (it is used only with four runs or more and finite values for every run)."""
     n = len(runs)
     if n == 3:
         # the run whose sump temperature is between the other two: the friction correction is
@@ -120,26 +122,26 @@ def _whole_run_picks(runs, pack_temperature_c=None) -> list:
         # model's held-out RMSE was 151 N*m against the nominal's 74, and a friction fall with
         # dissipated energy found beyond the catalog (t = 15.1) patched that extrapolation
         sump = [float(np.mean(r.sump_temperature_c)) for r in runs]
-        return [int(np.argsort(sump)[1])]
+        return [int(np.argsort(sump)[1])], False
     picks = list(range(1, n, 3))
+    pack_extreme = None
     if n >= 4:
         slip = np.array([float(np.mean(np.abs(r.slip_speed_rad_s))) for r in runs])
         sump = np.array([float(np.mean(r.sump_temperature_c)) for r in runs])
         extreme = {int(np.argmax(slip)), int(np.argmin(slip)), int(np.argmax(sump)), int(np.argmin(sump))}
-        pack_extreme = set()
         if pack_temperature_c is not None and len(pack_temperature_c) == n:
             # the friction law's own temperature, as the bench model predicts it: a run hotter
             # than every fit run asks the calibration to extrapolate. Measured on none@held#7
             # (magnitude seed 20261128): the held-out run ran at 73-109 C, the fit runs at
             # 33-84 C; the calibrated model's held-out RMSE was 19.3 N*m against the bench
             # model's 8.4, and the diagnosis read `unexplained` where nothing was hidden
-            mean = np.array([float(np.nanmean(p)) if np.size(p) else np.nan for p in pack_temperature_c])
-            peak = np.array([float(np.nanmax(p)) if np.size(p) else np.nan for p in pack_temperature_c])
+            mean = np.array([float(np.nanmean(p)) if np.isfinite(p).any() else np.nan for p in pack_temperature_c])
+            peak = np.array([float(np.nanmax(p)) if np.isfinite(p).any() else np.nan for p in pack_temperature_c])
             if np.isfinite(mean).all() and np.isfinite(peak).all():
                 pack_extreme = {int(np.argmax(mean)), int(np.argmin(mean)), int(np.argmax(peak))}
 
         def cost(j):      # a pack-temperature extreme weighs more than any slip or sump extreme
-            return (j in pack_extreme, j in extreme)
+            return (j in (pack_extreme or ()), j in extreme)
 
         chosen = set()
         for k in picks:
@@ -147,7 +149,7 @@ def _whole_run_picks(runs, pack_temperature_c=None) -> list:
                        if 0 <= j < n and j not in chosen and (j == k or j not in picks)]
             chosen.add(min(options, key=cost) if options else k)    # min keeps the first of equal cost
         picks = sorted(chosen)
-    return picks
+    return picks, pack_extreme is not None
 
 
 def choose_split(runs, held_out=None, min_runs_whole: int = MIN_RUNS_WHOLE, guard_s: float = GUARD_S,
@@ -162,9 +164,8 @@ def choose_split(runs, held_out=None, min_runs_whole: int = MIN_RUNS_WHOLE, guar
     if held_out:
         return Split([parse_held_out(str(h)) for h in held_out], guard_s, "given")
     if len(runs) >= min_runs_whole:
-        picks = _whole_run_picks(runs, pack_temperature_c)
-        extremes = "pack temperature, slip or sump temperature" if pack_temperature_c is not None else \
-            "slip or sump temperature"
+        picks, by_pack = _whole_run_picks(runs, pack_temperature_c)
+        extremes = "pack temperature, slip or sump temperature" if by_pack else "slip or sump temperature"
         how = ("whole runs: the run whose sump temperature is between the other two's" if len(runs) == 3 else
                "whole runs: every third from the second in log-time order, moved off the runs with the "
                f"campaign's extreme {extremes}")
