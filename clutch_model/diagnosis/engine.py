@@ -416,9 +416,14 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
         say(sampled.plan.describe())
         timings["sample (whole-campaign simulations)"] = time.perf_counter() - t0
     if sampled is not None and not held_out:
-        split = choose_split(campaign.runs, None)          # whole windows held out
+        # whole windows held out, off the windows with the bench model's extreme pack temperature
+        # first (as whole runs are, below)
+        pack = [sampled.bench_pack_temperature_c[sl] for _, sl in campaign.slices()]
+        split = choose_split(campaign.runs, None, pack_temperature_c=pack)
         split.how = ("whole windows of the diagnosis sample: every third from the second in log-time order, "
-                     "moved off the windows with the extreme slip or sump temperature")
+                     "moved off the windows with the extreme "
+                     + ("pack temperature, slip or sump temperature" if "pack temperature" in split.how
+                        else "slip or sump temperature"))
         fit_mask, eval_mask = split.masks(campaign.names, campaign.run_index, campaign.t)
     elif sampled is not None:
         split = choose_split(full.runs, held_out)          # the given spans, row by row
@@ -630,6 +635,7 @@ class _Sampled:
     nominal_pred: np.ndarray
     bench_pred: np.ndarray
     energy_total_j: float
+    bench_pack_temperature_c: np.ndarray    # the bench model's pack temperature on the sample's rows
 
     @classmethod
     def choose(cls, full: Campaign, nominal: ClutchModel, bench_model: ClutchModel, budget_s: float) -> "_Sampled":
@@ -655,7 +661,8 @@ class _Sampled:
                             windows=[(r.source, float(r.t[0]), float(r.t[-1])) for r in camp.runs],
                             rows_full=int(full.t.size), rows_sample=int(camp.t.size))
         return cls(full, plan, windows, camp, rows, measured(nominal, nom.torque_nm),
-                   measured(bench_model, bench.torque_nm), float(bench.energy_end_j))
+                   measured(bench_model, bench.torque_nm), float(bench.energy_end_j),
+                   np.asarray(bench.pack_temperature_c, float)[rows])
 
     def restart_from(self, model: ClutchModel) -> Campaign:
         """The sample with its windows started from ``model``'s states."""

@@ -136,6 +136,8 @@ def _sampled_diagnosis(tmp_path, spec, budget_s):
     # the held-out data are whole windows, none of them fitted
     assert set(rep["held_out_runs"]) <= set(smp["windows"]) and set(rep["fit_runs"]) <= set(smp["windows"])
     assert not set(rep["held_out_runs"]) & set(rep["fit_runs"]) and len(rep["held_out_runs"]) >= 2
+    # moved off the windows with the bench model's extreme pack temperature, as whole runs are
+    assert rep["split"].startswith("whole windows") and "pack temperature" in rep["split"]
     return rep, smp
 
 
