@@ -111,8 +111,8 @@ class Split:
 
 
 def _whole_run_picks(runs, pack_temperature_c=None) -> tuple:
-    """The indices of the held-out runs, and whether the pack temperature's extremes moved
-    them (it is used only with four runs or more and finite values for every run)."""
+    """The indices of the held-out runs, and whether the pack temperature's extremes were
+    weighed (only with four runs or more and a finite value for every run)."""
     n = len(runs)
     if n == 3:
         # the run whose sump temperature is between the other two: the friction correction is
