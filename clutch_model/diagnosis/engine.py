@@ -419,11 +419,7 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
         # whole windows held out, off the windows with the bench model's extreme pack temperature
         # first (as whole runs are, below)
         pack = [sampled.bench_pack_temperature_c[sl] for _, sl in campaign.slices()]
-        split = choose_split(campaign.runs, None, pack_temperature_c=pack)
-        split.how = ("whole windows of the diagnosis sample: every third from the second in log-time order, "
-                     "moved off the windows with the extreme "
-                     + ("pack temperature, slip or sump temperature" if "pack temperature" in split.how
-                        else "slip or sump temperature"))
+        split = choose_split(campaign.runs, None, pack_temperature_c=pack, runs_are="windows")
         fit_mask, eval_mask = split.masks(campaign.names, campaign.run_index, campaign.t)
     elif sampled is not None:
         split = choose_split(full.runs, held_out)          # the given spans, row by row

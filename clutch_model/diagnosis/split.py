@@ -153,11 +153,13 @@ def _whole_run_picks(runs, pack_temperature_c=None) -> tuple:
 
 
 def choose_split(runs, held_out=None, min_runs_whole: int = MIN_RUNS_WHOLE, guard_s: float = GUARD_S,
-                 pack_temperature_c=None) -> Split:
+                 pack_temperature_c=None, runs_are: str = "runs") -> Split:
     """The split of a campaign (runs in log-time order, each with .name, .t, .slip_speed_rad_s,
     .sump_temperature_c). ``held_out``: labels given by the user ("bag" or "bag[t0:t1]").
     ``pack_temperature_c``: optional per-run pack temperature (one array per run, e.g. the bench
-    model's replay); with four runs or more the held-out runs are moved off its extremes first."""
+    model's replay); with four runs or more the held-out runs are moved off its extremes first.
+    ``runs_are``: what the runs are, for the split's text (a long log's diagnosis sample holds
+    out whole windows: "windows")."""
     runs = list(runs)
     if not runs:
         raise DataError("no runs")
@@ -166,9 +168,10 @@ def choose_split(runs, held_out=None, min_runs_whole: int = MIN_RUNS_WHOLE, guar
     if len(runs) >= min_runs_whole:
         picks, by_pack = _whole_run_picks(runs, pack_temperature_c)
         extremes = "pack temperature, slip or sump temperature" if by_pack else "slip or sump temperature"
-        how = ("whole runs: the run whose sump temperature is between the other two's" if len(runs) == 3 else
-               "whole runs: every third from the second in log-time order, moved off the runs with the "
-               f"campaign's extreme {extremes}")
+        one = runs_are[:-1] if runs_are.endswith("s") else runs_are
+        how = (f"whole {runs_are}: the {one} whose sump temperature is between the other two's" if len(runs) == 3
+               else f"whole {runs_are}: every third from the second in log-time order, moved off the {runs_are} "
+                    f"with the campaign's extreme {extremes}")
         return Split([HeldOut(runs[k].name) for k in picks], guard_s, how)
     total = sum(max(r.duration_s, 0.0) for r in runs)
     span = min(max(total / TARGET_SPANS, MIN_SPAN_S), MAX_SPAN_S)

@@ -127,9 +127,14 @@ def test_many_runs_hold_out_a_run_inside_the_fit_runs_pack_temperature_range():
     three = [np.linspace(th - d, th + d, r.t.size) for r, th, d in zip(runs, (40.0, 95.0, 60.0, 70.0),
                                                                            (5.0, 5.0, 60.0, 5.0))]
     assert choose_split(runs, pack_temperature_c=three).labels == ["run_03"]
-    # the split says what moved it: the pack temperature only when it was usable
+    # the split says what it weighed: the pack temperature only when it was usable
     assert "pack temperature" in choose_split(runs, pack_temperature_c=hot).how
     assert "pack temperature" not in choose_split(runs).how
     unusable = [np.full(r.t.size, np.nan) for r in runs]
     split = choose_split(runs, pack_temperature_c=unusable)
     assert split.labels == ["run_01"] and "pack temperature" not in split.how
+    # a long log's windows are named as what they are, the picks unchanged
+    windows = choose_split(runs, pack_temperature_c=hot, runs_are="windows")
+    assert windows.labels == ["run_02"]
+    assert windows.how.startswith("whole windows: ") and "moved off the windows with" in windows.how
+    assert choose_split(runs[:3], runs_are="windows").how.startswith("whole windows: the window whose")
