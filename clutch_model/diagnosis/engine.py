@@ -37,6 +37,7 @@ from clutch_model.diagnosis import features as F
 from clutch_model.diagnosis.candidates import CampaignContext, MechanismCandidate, baseline_fit
 from clutch_model.diagnosis.input_hold import decide_input_noise, with_midpoint_force, with_smoothed_slip
 from clutch_model.diagnosis.lockup import without_locked_torque
+from clutch_model.diagnosis.run_level import within_run_forecast
 from clutch_model.diagnosis.force_dynamics import named_or_force_dynamics
 from clutch_model.diagnosis.fitting import CANDIDATE_IDS, CandidateFit, fit_candidate
 from clutch_model.diagnosis.noise_model import fit_noise_model, white_floor
@@ -723,8 +724,10 @@ def _discover(data: SelectionData, base, campaign: Campaign, bench_model: Clutch
     dsel = _judge_discovery(data, base, DiscoveryCandidate(campaign, bench_model=bench_model, progress=say), say)
     accepted = dsel.verdict == "named" and bool(dsel.causes and dsel.causes[0].parameters)
     if accepted:
-        why = (spans_cannot_check(dsel.causes[0].parameters, whole_bag_held_out)
-               or phase_differs_between_runs(data, residual(data, base), dsel.causes[0].parameters))
+        terms = dsel.causes[0].parameters
+        why = (spans_cannot_check(terms, whole_bag_held_out)
+               or phase_differs_between_runs(data, residual(data, base), terms)
+               or energy_not_within_runs(data, residual(data, base), residual(data, dsel.causes[0].fitted), terms))
         if why:
             say(f"discovery: not accepted: {why}")
             return DiscoveryOutcome(replace(dsel, verdict="unexplained", reason=why), False, why)
@@ -828,6 +831,27 @@ def energy_unchecked(terms, whole_bag_held_out: bool) -> str:
             f"told from a friction level that differs from run to run (hold out a whole run to check them)")
 
 
+def energy_not_within_runs(data: SelectionData, resid_base: np.ndarray, resid_extension: np.ndarray,
+                           terms) -> str:
+    """Why a discovered extension in the dissipated energy alone does not hold within the runs,
+    or ''. With a whole run held out it is checked on another run, but only on the order of
+    the runs' levels (three seen runs have monotone levels one time in three): it must also
+    predict how each run's torque changes after the run's first half, beyond a level of the
+    run (``run_level.within_run_forecast``)."""
+    if not terms or not all("energy" in t for t in terms):
+        return ""
+    w = within_run_forecast(data.y, resid_base, resid_extension, np.asarray(data.train_mask, bool)
+                            | np.asarray(data.test_mask, bool), data.run_start, data.t)
+    if w.holds(ALPHA, NAMED_GAIN_FRAC):
+        return ""
+    c = w.comparison
+    return (f"the discovered terms ({', '.join(terms)}) follow only the energy dissipated so far, which grows over "
+            f"the campaign like a clock, and within the runs they predict nothing: each run's level fitted on its "
+            f"first half predicts its second half to {c.rmse_null:.2f} N·m without them and {c.rmse_alt:.2f} N·m "
+            f"with them (t = {c.t_stat:.1f} over {w.runs} runs), so they cannot be told from a friction level "
+            f"that differs from run to run")
+
+
 def spans_cannot_check(terms, whole_bag_held_out: bool) -> str:
     """Why held-out time spans of the fitted runs cannot check a discovered extension (its
     terms follow the slip angle, or the dissipated energy alone), or ''."""
@@ -923,7 +947,8 @@ def _catalog_or_beyond(data: SelectionData, base, campaign: Campaign, bench_mode
     top = _judge_discovery(data, sel.final, DiscoveryCandidate(campaign, bench_model=bench_model, progress=say),
                            say)
     found = top.causes[0] if top.verdict == "named" and top.causes else None
-    if found is None or not found.parameters or spans_cannot_check(found.parameters, whole_bag_held_out):
+    if (found is None or not found.parameters or spans_cannot_check(found.parameters, whole_bag_held_out)
+            or energy_not_within_runs(data, residual(data, sel.final), residual(data, found.fitted), found.parameters)):
         say("nothing beyond the catalog holds on top of the named causes")
         return sel, None
     terms = ", ".join(found.parameters)

@@ -90,3 +90,23 @@ def test_a_ripple_phase_that_differs_from_run_to_run_does_not_carry():
         assert phase_differs_between_runs(data, noise + common, terms) == "", seed
         assert "does not carry" in phase_differs_between_runs(data, noise + per_run, terms), seed
         assert phase_differs_between_runs(data, noise + per_run, {"mu:slip_power": -0.01}) == ""
+
+
+def test_terms_in_the_dissipated_energy_alone_must_hold_within_the_runs():
+    """With a whole run held out, a term in the energy alone is still refused when the friction
+    rose by a level per run in run order (what a held-out run cannot tell); it stands when the
+    friction follows the energy within the runs too. Terms beside the energy's are not checked."""
+    from clutch_model.diagnosis.engine import energy_not_within_runs
+    from clutch_model.diagnosis.selection import SelectionData
+
+    from .test_run_level import _clock_campaign
+
+    for truth, refused in (("levels", True), ("energy", False)):
+        measured, base, ext, rows, run_start, t = _clock_campaign(3, "ar1_095", truth)
+        test = np.cumsum(run_start) - 1 == 3
+        data = SelectionData(measured, t, run_start, ~test, test)
+        why = energy_not_within_runs(data, base, ext, {"mu:energy": 0.01})
+        assert (why != "") == refused, why
+        if refused:
+            assert "mu:energy" in why and "level that differs from run to run" in why and "4 runs" in why
+        assert energy_not_within_runs(data, base, ext, {"mu:energy": 0.01, "mu:slip_power@1.0s": -0.05}) == ""

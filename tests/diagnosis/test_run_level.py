@@ -100,3 +100,47 @@ def test_selection_says_unexplained_for_a_level_per_run_and_none_without():
     sel = _selection(None)
     assert sel.verdict == "none", sel.reason
     assert sel.run_level is not None and not sel.run_level.found
+
+
+def _clock_campaign(seed, noise, truth):
+    """Four runs whose friction rises over the campaign: with the energy dissipated so far
+    (``truth="energy"``, also within each run) or by a level per run in run order
+    (``truth="levels"``, constant within a run). Returns (measured, baseline residual,
+    residual of "μ_f rises with the energy", rows, run_start, t): both models fitted by least
+    squares over the whole campaign, as the calibration and the discovery fit them."""
+    d = make_inputs(seed, n_runs=4, duration_s=10.0)
+    run_id = np.cumsum(d["run_start"]) - 1
+    torque = 40.0 * d["torque"]
+    energy = d["energy"] / d["energy"][-1]                 # 0 -> 1 over the campaign
+    # +1 % over the campaign (the residual's RMS about 3 noise sds), or the same rise in steps
+    if truth == "energy":
+        factor = 1.0 + 0.01 * energy
+    else:
+        factor = 1.0 + 0.01 * (run_id + 0.5) / 4.0
+    measured = torque * factor + make_noise(noise, d["run_start"], SIGMA_NM, 700 + seed)
+    r = measured - torque
+    level = np.linalg.lstsq(torque[:, None], r, rcond=None)[0]
+    both = np.linalg.lstsq(np.column_stack([torque, torque * energy]), r, rcond=None)[0]
+    base = r - level[0] * torque
+    extension = r - both[0] * torque - both[1] * torque * energy
+    return measured, base, extension, np.ones(r.size, bool), d["run_start"], d["t"]
+
+
+@pytest.mark.parametrize("noise", NOISE_CLASSES)
+def test_energy_term_holds_within_runs_only_when_the_friction_follows_the_energy(noise):
+    """A term in the energy dissipated so far fits levels that rise with the run order as well
+    as a friction that rises with the energy; only the latter changes within a run. The
+    within-run forecast (each run's level fitted on its first half, the second half predicted)
+    holds for it under every noise class and not for the levels."""
+    from clutch_model.diagnosis.run_level import within_run_forecast
+
+    for seed in (1, 2):
+        measured, base, ext, rows, run_start, t = _clock_campaign(seed, noise, "energy")
+        w = within_run_forecast(measured, base, ext, rows, run_start, t)
+        assert w.runs == 4 and w.holds(1e-3, 0.005), (seed, w.comparison)
+        measured, base, ext, rows, run_start, t = _clock_campaign(seed, noise, "levels")
+        # the campaign-wide fit sees the rise: the energy term cuts the residual over the runs
+        assert np.mean(ext ** 2) < 0.5 * np.mean(base ** 2)
+        w = within_run_forecast(measured, base, ext, rows, run_start, t)
+        assert not w.holds(1e-3, 0.005), (seed, w.comparison)
+        assert w.comparison.rmse_alt > w.comparison.rmse_null
