@@ -864,3 +864,52 @@ def test_dynamic_rivals_the_held_out_rows_side_with_are_parted_by_the_encompassi
     co = _LagFit("torque_sensor_lag", eps, co={"transport_delay": {"delay_s": 0.04}})
     assert encompasses(data, wrong.resid, co.resid, *dynamic_dimensions(wrong, co), max_order=48) is None
     assert encompasses(data, wrong.resid, right.resid, None, None, max_order=48) is None
+
+
+def test_a_swap_lookalike_goes_with_the_cause_it_rivals(monkeypatch):
+    """A swap check's lookalike rivals one named cause in its place; when that cause is then
+    dropped because its interval does not pin it down, the question goes with it
+    (friction_degradation@drift#2: the answer read "cannot be told apart from actuator_lag",
+    the lookalike of a preload that was no longer named). In the campaign of the test above
+    (A a lookalike of C, named beside B), C's interval is declared unidentified: A is no longer
+    a lookalike, and what A carries is left to the remainder test."""
+    import sys
+
+    from clutch_model.diagnosis import selection as S
+
+    real = S._compare
+
+    def compare(data_, resid_null, resid_alt, max_order):
+        head = real(data_, resid_null, resid_alt, max_order)
+        caller = sys._getframe(1)
+        if {"_swap_check"} & {caller.f_code.co_name, caller.f_back.f_code.co_name} and head.delta_ll > 0:
+            head.rmse_null, head.rmse_alt = min(head.rmse_null, head.rmse_alt), max(head.rmse_null, head.rmse_alt)
+        return head
+
+    d, names, X, train, test, cols, eps, groups = _campaign(2, "ar1_095")
+    a, b, dd = 0.03 * cols["slip_power"], 6.0 * cols["offset"], 0.03 * cols["temperature"]
+    cands = [LinearCandidate("A", a), LinearCandidate("B", b), LinearCandidate("C", a + 0.4 * b + 0.7 * dd),
+             LinearCandidate("slip", cols["slip"])]
+    data = _data(a + b + eps, d, names, X, train, test, groups)
+    monkeypatch.setattr(S, "_compare", compare)
+    kept = S.select_causes(data, Zero(), cands)
+    assert kept.verdict == "unexplained" and "A" in kept.closest, kept.reason       # as above, with intervals
+    late = kept.steps[-1]
+    assert late.chosen is None and late.lookalikes == ["A"] and late.lookalike_of == {"A": "C"}
+
+    first_named = []                                    # the causes whose intervals are judged, in order
+    real_ci = S.parameter_ci95
+
+    def ci(cand, fitted, *args, **kw):
+        first_named.append(cand.id)
+        return real_ci(cand, fitted, *args, **kw)
+
+    def unidentified(ci95, *args):
+        return bool(first_named) and first_named.pop(0) == "C"
+
+    monkeypatch.setattr(S, "parameter_ci95", ci)
+    monkeypatch.setattr(S, "_unidentified", unidentified)
+    sel = S.select_causes(data, Zero(), cands)
+    assert sel.verdict == "unexplained" and sel.reason.startswith("after B structure remains"), sel.reason
+    assert "cannot be told apart" not in sel.reason and sel.steps[-1].lookalikes == []
+    assert sel.closest == ["B"]
