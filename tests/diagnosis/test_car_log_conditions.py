@@ -251,15 +251,22 @@ def test_second_order_actuator_is_not_named_a_catalog_time_mechanism(tmp_path, c
     pytest.param("ar1", 3, {"actuator_lag": 0.05381363382159282, "transport_delay": 0.09639873809998827},
                  marks=pytest.mark.slow)])
 def test_a_lag_and_a_delay_are_named_together(tmp_path, condition, seed, magnitudes):
-    camp = make_hidden_campaign("actuator_lag+transport_delay", condition, seed, tmp_path / "campaign",
-                                magnitudes=magnitudes, quick=True)
+    _named_together(tmp_path, "actuator_lag+transport_delay", condition, seed, magnitudes,
+                    (("actuator_lag", "tau_s"), ("transport_delay", "delay_s")), quick=True, unseen_cut=0.2)
+
+
+def _named_together(tmp_path, case, condition, seed, magnitudes, parameters, quick, unseen_cut):
+    """Both hidden causes named, each within 15 % of its hidden value and inside its own 95 %
+    interval; the extended model's error on the unseen bags below ``unseen_cut`` x the
+    calibrated model's."""
+    camp = make_hidden_campaign(case, condition, seed, tmp_path / "campaign", magnitudes=magnitudes, quick=quick)
     res = check_campaign(camp, tmp_path, mc_samples=MC_SAMPLES, stamps=False)
     what = f"diagnose said {res.named_label}: {(res.report or {}).get('cause', {}).get('evidence', res.error)}"
     assert res.judgement == "ok", what
     cal, ext = res.replay_rmse_nm["calibrated"], res.replay_rmse_nm["extended"]
-    assert ext < 0.2 * cal, f"{what}; unseen bags: calibrated {cal:.2f}, extended {ext:.2f} N*m"
+    assert ext < unseen_cut * cal, f"{what}; unseen bags: calibrated {cal:.2f}, extended {ext:.2f} N*m"
     got = {c["id"]: c for c in res.report["causes"]}
-    for mech_id, name in (("actuator_lag", "tau_s"), ("transport_delay", "delay_s")):
+    for mech_id, name in parameters:
         assert got[mech_id]["parameters"][name] == pytest.approx(magnitudes[mech_id], rel=0.15), what
         lo, hi = got[mech_id]["parameters_ci95"][name]
         assert lo < got[mech_id]["parameters"][name] < hi, what
@@ -272,17 +279,9 @@ def test_a_lag_and_a_delay_are_named_together(tmp_path, condition, seed, magnitu
 # _backfitted_second: t = 7.0). With -m slow (about 3 min).
 @pytest.mark.slow
 def test_a_preload_and_an_offset_are_named_together_on_the_car(tmp_path):
-    magnitudes = {"spring_preload": 709.9367362342127, "torque_offset": 13.44862737078797}
-    camp = make_hidden_campaign("spring_preload+torque_offset", "car", 1, tmp_path / "campaign",
-                                magnitudes=magnitudes, quick=False)
-    res = check_campaign(camp, tmp_path, mc_samples=MC_SAMPLES, stamps=False)
-    what = f"diagnose said {res.named_label}: {(res.report or {}).get('cause', {}).get('evidence', res.error)}"
-    assert res.judgement == "ok", what
-    cal, ext = res.replay_rmse_nm["calibrated"], res.replay_rmse_nm["extended"]
-    assert ext < 0.5 * cal, f"{what}; unseen bags: calibrated {cal:.2f}, extended {ext:.2f} N*m"
-    got = {c["id"]: c for c in res.report["causes"]}
-    for mech_id, name in (("spring_preload", "preload_n"), ("torque_offset", "offset_nm")):
-        assert got[mech_id]["parameters"][name] == pytest.approx(magnitudes[mech_id], rel=0.15), what
+    _named_together(tmp_path, "spring_preload+torque_offset", "car", 1,
+                    {"spring_preload": 709.9367362342127, "torque_offset": 13.44862737078797},
+                    (("spring_preload", "preload_n"), ("torque_offset", "offset_nm")), quick=False, unseen_cut=0.5)
 
 
 # An actuator lag (55 ms) under torque noise drawn at 10 Hz and held, and a torque-sensor lag
