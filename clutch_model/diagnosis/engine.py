@@ -727,7 +727,7 @@ def _discover(data: SelectionData, base, campaign: Campaign, bench_model: Clutch
         terms = dsel.causes[0].parameters
         why = (spans_cannot_check(terms, whole_bag_held_out)
                or phase_differs_between_runs(data, residual(data, base), terms)
-               or energy_not_within_runs(data, residual(data, base), residual(data, dsel.causes[0].fitted), terms))
+               or energy_not_within_runs(data, base, dsel.causes[0].fitted, terms))
         if why:
             say(f"discovery: not accepted: {why}")
             return DiscoveryOutcome(replace(dsel, verdict="unexplained", reason=why), False, why)
@@ -824,24 +824,30 @@ def energy_unchecked(terms, whole_bag_held_out: bool) -> str:
     rose 25 % and 6 %; on the same matrices every accepted extension that passed had a term
     that was not the energy's (slip-power fade with a slip-power × energy term beside it on
     the car: +69 % and +78 %). A catalog friction_degradation is unaffected."""
-    if whole_bag_held_out or not terms or not all("energy" in t for t in terms):
+    if whole_bag_held_out or not energy_only(terms):
         return ""
     return (f"the discovered terms ({', '.join(terms)}) follow only the energy dissipated so far, which grows "
             f"over the campaign like a clock, and only time spans of the fitted runs are held out: they cannot be "
             f"told from a friction level that differs from run to run (hold out a whole run to check them)")
 
 
-def energy_not_within_runs(data: SelectionData, resid_base: np.ndarray, resid_extension: np.ndarray,
-                           terms) -> str:
+def energy_only(terms) -> bool:
+    """Every term of a discovered extension follows the energy dissipated so far."""
+    return bool(terms) and all("energy" in t for t in terms)
+
+
+def energy_not_within_runs(data: SelectionData, base, extension, terms) -> str:
     """Why a discovered extension in the dissipated energy alone does not hold within the runs,
     or ''. With a whole run held out it is checked on another run, but only on the order of
     the runs' levels (three seen runs have monotone levels one time in three): it must also
     predict how each run's torque changes after the run's first half, beyond a level of the
-    run (``run_level.within_run_forecast``)."""
-    if not terms or not all("energy" in t for t in terms):
+    run (``run_level.within_run_forecast``). ``base``, ``extension``: the fitted models
+    without and with the terms (their residuals are taken only for such terms)."""
+    if not energy_only(terms):
         return ""
-    w = within_run_forecast(data.y, resid_base, resid_extension, np.asarray(data.train_mask, bool)
-                            | np.asarray(data.test_mask, bool), data.run_start, data.t)
+    w = within_run_forecast(data.y, residual(data, base), residual(data, extension),
+                            np.asarray(data.train_mask, bool) | np.asarray(data.test_mask, bool), data.run_start,
+                            data.t)
     if w.holds(ALPHA, NAMED_GAIN_FRAC):
         return ""
     c = w.comparison
@@ -948,7 +954,7 @@ def _catalog_or_beyond(data: SelectionData, base, campaign: Campaign, bench_mode
                            say)
     found = top.causes[0] if top.verdict == "named" and top.causes else None
     if (found is None or not found.parameters or spans_cannot_check(found.parameters, whole_bag_held_out)
-            or energy_not_within_runs(data, residual(data, sel.final), residual(data, found.fitted), found.parameters)):
+            or energy_not_within_runs(data, sel.final, found.fitted, found.parameters)):
         say("nothing beyond the catalog holds on top of the named causes")
         return sel, None
     terms = ", ".join(found.parameters)

@@ -232,14 +232,14 @@ def within_run_forecast(measured: np.ndarray, residual_base: np.ndarray, residua
         idx = np.flatnonzero(ok & (run_id == j))
         if idx.size < 2 * MIN_PIECE_ROWS:
             continue
-        a = idx[t[idx] < 0.5 * (t[idx[0]] + t[idx[-1]])]
-        if a.size < MIN_PIECE_ROWS or idx.size - a.size < MIN_PIECE_ROWS or np.ptp(T[a]) <= 0:
+        early = t[idx] < 0.5 * (t[idx[0]] + t[idx[-1]])
+        a, b = idx[early], idx[~early]
+        if a.size < MIN_PIECE_ROWS or b.size < MIN_PIECE_ROWS or np.ptp(T[a]) <= 0:
             continue
         for r, out in ((r0, level0), (r1, level1)):
             beta = np.linalg.lstsq(X[a], r[a], rcond=None)[0]
             out[idx] = r[idx] - X[idx] @ beta
         first[a] = True
-        second[idx] = True
+        second[b] = True
         runs += 1
-    second &= ~first
     return WithinRunForecast(compare_residuals(level0, level1, first, second, run_start, t), runs)

@@ -949,6 +949,7 @@ def _look_ahead(data, baseline, resid_base, structured: bool, step1: SelectionSt
 
 
 OTHER_FIRST_P = 0.01    # another first cause is tried when the second step's best held-out p is below this
+BACKFIT_SECOND_TOP = 3  # ... and this many second-step candidates refitted together with the one named cause
 
 
 def _nearly_second(step2: SelectionStep) -> bool:
@@ -1046,9 +1047,6 @@ def _backfitted_second(data, resid_cur, named, step2: SelectionStep, cand_by_id,
             causes[1].comparison = pair
             best = (pair, causes, model)
     return None if best is None else (best[1], best[2])
-
-
-BACKFIT_SECOND_TOP = 3         # second-step candidates refitted together with the one named cause
 
 
 UNIDENTIFIED_SPAN = 10.0    # a named cause's 95 % interval spanning more than this factor (or 0) is no name

@@ -92,6 +92,16 @@ def test_a_ripple_phase_that_differs_from_run_to_run_does_not_carry():
         assert phase_differs_between_runs(data, noise + per_run, {"mu:slip_power": -0.01}) == ""
 
 
+class _Predicts:
+    """A fitted model that predicts the given torque."""
+
+    def __init__(self, torque):
+        self.torque = torque
+
+    def predict(self, data):
+        return self.torque
+
+
 def test_terms_in_the_dissipated_energy_alone_must_hold_within_the_runs():
     """With a whole run held out, a term in the energy alone is still refused when the friction
     rose by a level per run in run order (what a held-out run cannot tell); it stands when the
@@ -105,6 +115,7 @@ def test_terms_in_the_dissipated_energy_alone_must_hold_within_the_runs():
         measured, base, ext, rows, run_start, t = _clock_campaign(3, "ar1_095", truth)
         test = np.cumsum(run_start) - 1 == 3
         data = SelectionData(measured, t, run_start, ~test, test)
+        base, ext = _Predicts(measured - base), _Predicts(measured - ext)
         why = energy_not_within_runs(data, base, ext, {"mu:energy": 0.01})
         assert (why != "") == refused, why
         if refused:
