@@ -506,7 +506,7 @@ def _swap_check(data, baseline, named, steps, cand_by_id, current, without, alph
         if model_wo is None:
             model_wo = refit_chain(data, baseline, others, cand_by_id, refine)[0]
         resid_wo, resid_full = residual(data, model_wo), residual(data, current)
-        beaten = []
+        beaten, untold = [], []
         for rival in rivals:
             order = [rival if c is cause else c.id for c in named]     # the rival in the cause's place
             model_r, causes_r = refit_chain(data, baseline, order, cand_by_id, refine)
@@ -515,15 +515,9 @@ def _swap_check(data, baseline, named, steps, cand_by_id, current, without, alph
             if not holds.significant(alpha, min_gain_frac, plain_gain):
                 beaten.append(rival)
                 continue
-            # rival and cause static (head_to_head): the two models meet on every row
-            fitted_r = next(c.fitted for c in causes_r if c.id == rival)
-            static = static_dimension(cause.fitted) is not None and static_dimension(fitted_r) is not None
-            dims = (causes_dimension(named), causes_dimension(causes_r)) if static else (None, None)
+            dims, rival_dims = _rival_dimensions(cause, named, rival, causes_r)
             head = _compare_rivals(data, resid_full, resid_r, *dims, max_order)
             back = _compare_rivals(data, resid_r, resid_full, dims[1], dims[0], max_order)
-            # two time mechanisms in the cause's place, as many parameters in all: parts_rivals
-            dynamic = getattr(cause.fitted, "dynamic", False) and getattr(fitted_r, "dynamic", False)
-            rival_dims = (causes_dimension(named), causes_dimension(causes_r)) if dynamic else (None, None)
             takes = _takes_the_name(head, lookalike_alpha)
             part = None if takes or _beats(back, lookalike_alpha) else parts_rivals(data, resid_full, resid_r,
                                                                                       *rival_dims, max_order)
@@ -537,16 +531,51 @@ def _swap_check(data, baseline, named, steps, cand_by_id, current, without, alph
                              f"against {head.rmse_null:.2f} N·m)")
                 named, current = causes_r, model_r
                 step.replaced_by = rival
+                # the rivals the replaced cause could not tell apart meet its replacement
+                told = _told_apart(data, named, residual(data, current), rival, untold, lookalike_alpha, max_order)
+                looks += [(lk, rival) for lk, _, _ in untold if lk not in told]
+                step.lookalikes = [lk for lk in step.lookalikes if lk != rival and lk not in told | set(beaten)]
                 break
             if _beats(back, lookalike_alpha) or parts_rivals(data, resid_r, resid_full, *rival_dims[::-1], max_order):
                 beaten.append(rival)
             else:
-                looks.append((rival, cause.id))
+                untold.append((rival, resid_r, causes_r))
         else:
+            looks += [(lk, cause.id) for lk, _, _ in untold]
             # no swap: a lookalike of the cause's own step that, with the other causes in the
             # model, does not hold or loses head to head is told apart now
             step.lookalikes = [lk for lk in step.lookalikes if lk not in beaten]
     return current, named, swaps, looks
+
+
+def _rival_dimensions(cause, named: list, rival: str, causes_r: list) -> tuple:
+    """The dimensions a swap check compares the named causes and the rival's set with:
+    (static, for head_to_head on every row when cause and rival are both static;
+    dynamic, for parts_rivals when both are time mechanisms), each (None, None) otherwise."""
+    fitted_r = next(c.fitted for c in causes_r if c.id == rival)
+    static = static_dimension(cause.fitted) is not None and static_dimension(fitted_r) is not None
+    dynamic = getattr(cause.fitted, "dynamic", False) and getattr(fitted_r, "dynamic", False)
+    both = (causes_dimension(named), causes_dimension(causes_r))
+    return (both if static else (None, None)), (both if dynamic else (None, None))
+
+
+def _told_apart(data, named: list, resid_named, cause_id: str, untold, lookalike_alpha, max_order) -> set:
+    """The rivals of ``untold`` ((id, residual with the rival in the cause's place, the rival's
+    causes)) that the ``named`` model (residual ``resid_named``, ``cause_id`` in the place)
+    beats head to head or parts from.
+    A swap replaces a cause whose lookalikes were judged against it: a rival the old cause
+    could not beat is a lookalike of the new one only if the new one cannot beat it either
+    (transport_delay+drag_torque@lowpass#1, quick: actuator_lag was named with drag, the sensor
+    lag tied with it, then the delay took its place; the sensor lag stayed a lookalike of the
+    replaced lag and the answer read `unexplained`)."""
+    cause = next(c for c in named if c.id == cause_id)
+    told = set()
+    for rival, resid_r, causes_r in untold:
+        dims, rival_dims = _rival_dimensions(cause, named, rival, causes_r)
+        back = _compare_rivals(data, resid_r, resid_named, dims[1], dims[0], max_order)
+        if _beats(back, lookalike_alpha) or parts_rivals(data, resid_r, resid_named, *rival_dims[::-1], max_order):
+            told.add(rival)
+    return told
 
 
 def _refitted_friction_size(fit) -> int:
