@@ -541,7 +541,7 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
             # found, predictive on the held-out spans, but not checkable across runs: not noise
             sel = replace(sel, verdict="unexplained", closest=["discovered"],
                           reason=f"{sel.reason}; but discovery finds terms beyond the catalog that predict the "
-                                 f"held-out spans and cannot be checked on another run (below)")
+                                 f"held-out rows, not accepted: {discovery.refused}")
     elif discover and sel.verdict == "named" and "friction_degradation" in sel.cause_ids:
         # friction that falls as energy accumulates has a lookalike outside the catalog:
         # friction that fades with the slip power and recovers (reversible). Discovery's
@@ -731,6 +731,13 @@ def _discover(data: SelectionData, base, campaign: Campaign, bench_model: Clutch
         if why:
             say(f"discovery: not accepted: {why}")
             return DiscoveryOutcome(replace(dsel, verdict="unexplained", reason=why), False, why)
+    elif dsel.verdict == "unexplained" and dsel.steps and dsel.steps[0].chosen is not None:
+        # the extension predicts the held-out residual, and what it leaves is still structure
+        found = next(sc for sc in dsel.steps[0].scores if sc.id == dsel.steps[0].chosen)
+        why = (f"the terms it finds ({', '.join(found.fitted.parameters) or 'none'}) predict the held-out residual "
+               f"(t = {found.comparison.t_stat:.1f}), yet {dsel.reason}")
+        say(f"discovery: not accepted: {why}")
+        return DiscoveryOutcome(dsel, False, why)
     return DiscoveryOutcome(dsel, accepted)
 
 

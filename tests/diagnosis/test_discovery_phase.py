@@ -121,3 +121,30 @@ def test_terms_in_the_dissipated_energy_alone_must_hold_within_the_runs():
         if refused:
             assert "mu:energy" in why and "level that differs from run to run" in why and "4 runs" in why
         assert energy_not_within_runs(data, base, ext, {"mu:energy": 0.01, "mu:slip_power@1.0s": -0.05}) == ""
+
+
+def test_terms_found_that_leave_structure_are_not_noise(monkeypatch):
+    """A discovered extension that predicts the held-out residual while the inputs still
+    predict what it leaves is refused (not accepted), and the refusal says why; one that leaves
+    noise is accepted. The engine reads a refusal where the catalog named nothing as
+    `unexplained`, not `none` (torque_ripple@car#7: the ripple found at held-out t = 22, a
+    structure left at t = 5.9, and the answer read `none`)."""
+    import clutch_model.discovery.candidate as discovery_candidate
+    from clutch_model.diagnosis import engine
+
+    from .test_selection import LinearCandidate, Zero, _campaign, _data
+
+    d, names, X, train, test, cols, eps, groups = _campaign(6, "white")
+    ripple = 0.05 * d["torque"] * np.sin(d["angle"])
+    for found, y, leaves_structure in ((cols["slip_power"], 0.03 * cols["slip_power"] + ripple + eps, True),
+                                       (ripple, ripple + eps, False)):
+        data = _data(y, d, names, X, train, test, groups)
+        monkeypatch.setattr(discovery_candidate, "DiscoveryCandidate",
+                            lambda *a, _col=found, **kw: LinearCandidate("discovered", _col))
+        out = engine._discover(data, Zero(), None, None, lambda msg: None)
+        assert out.selection.steps[0].chosen == "discovered"
+        if leaves_structure:
+            assert not out.accepted and "predict the held-out residual" in out.refused, out.refused
+            assert "structure remains that the inputs predict" in out.refused
+        else:
+            assert out.accepted and out.refused == "", out.selection.reason
