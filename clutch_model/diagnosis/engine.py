@@ -38,7 +38,7 @@ from clutch_model.diagnosis.candidates import CampaignContext, MechanismCandidat
 from clutch_model.diagnosis.input_hold import decide_input_noise, with_midpoint_force, with_smoothed_slip
 from clutch_model.diagnosis.lockup import without_locked_torque
 from clutch_model.diagnosis.run_level import within_run_forecast
-from clutch_model.diagnosis.force_dynamics import named_or_force_dynamics
+from clutch_model.diagnosis.force_dynamics import named_or_force_dynamics, none_or_rate_limit
 from clutch_model.diagnosis.fitting import CANDIDATE_IDS, CandidateFit, fit_candidate
 from clutch_model.diagnosis.noise_model import fit_noise_model, white_floor
 from clutch_model.diagnosis.selection import (Selection, SelectionData, leaves_of, refit_chain, residual,
@@ -168,7 +168,7 @@ class Diagnosis:
     diagnosis_rate: dict = field(default_factory=dict)   # decimation plan (diagnosis.decimation)
     diagnosis_sample: dict = field(default_factory=dict)  # windows of a long campaign (diagnosis.sample)
     inputs: dict = field(default_factory=dict)  # the inputs' noise: slip smoothed, noise floor (input_hold.InputNoise)
-    force_path_check: dict | None = None  # a named time mechanism against a second-order force path (force_dynamics.py)
+    force_path_check: dict | None = None  # a force path beyond the catalog: second-order (named time mechanism) or rate-limited (none), force_dynamics.py
 
     @property
     def gain_pct(self) -> float:
@@ -553,6 +553,13 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
         t0 = time.perf_counter()
         sel, discovery = _catalog_or_beyond(data, base, campaign, bench_model, sel, cands, say, whole_bag)
         timings["discovery"] = time.perf_counter() - t0
+
+    # nothing found, in the catalog or beyond: a rate-limited force path (force_dynamics.py)
+    if sel.verdict == "none" and not (discovery is not None and discovery.accepted):
+        t0 = time.perf_counter()
+        sel, rate_limit = none_or_rate_limit(data, sel, campaign, sigma_guess, ALPHA, NAMED_GAIN_FRAC, say)
+        force_dynamics = force_dynamics or rate_limit
+        timings["force dynamics"] += time.perf_counter() - t0
 
     # -- stage 4: extend ------------------------------------------------------------------------
     cause = {"named": None, "none": "none", "unexplained": "unexplained"}[sel.verdict]
