@@ -270,8 +270,11 @@ def none_or_rate_limit(data, sel, campaign, sigma_nm: float, alpha: float, min_g
     if sel.verdict != "none":
         return sel, None
     say("nothing named: checking a slew-rate-limited force path beyond the catalog")
-    fit = fit_rate_limit(sel.final.fit.model, campaign, np.asarray(data.train_mask, bool), noise_sigma_nm=sigma_nm)
-    head = _compare(data, residual(data, sel.final), residual(data, fit), DEFAULT_MAX_ORDER)
+    train = np.asarray(data.train_mask, bool)
+    model = sel.final.fit.model
+    fit = fit_rate_limit(model, campaign, train, noise_sigma_nm=sigma_nm)
+    r_fit = residual(data, fit)
+    head = _compare(data, residual(data, sel.final), r_fit, DEFAULT_MAX_ORDER)
     rate = float(fit.parameters["rate_n_per_s"])
     found = {"kind": "rate-limited force path", "parameters": {"rate_n_per_s": rate},
              "held_out_t": float(head.t_stat), "held_out_p": float(head.p_value),
@@ -280,6 +283,14 @@ def none_or_rate_limit(data, sel, campaign, sigma_nm: float, alpha: float, min_g
     say(f"rate-limited force path ({rate:.3g} N/s) against the calibrated model on held-out rows: "
         f"t = {head.t_stat:.1f}, RMSE {head.rmse_alt:.2f} vs {head.rmse_null:.2f} N*m")
     found["took_the_name"] = bool(head.significant(alpha, min_gain_frac, plain_gain=True))
+    if found["took_the_name"]:
+        # its twin: the friction correction refitted alone, as the rate limit's was (the gain must
+        # be the force path's, not the refit's: selection._own_contribution)
+        twin = np.asarray(sel.final.context.friction_only(model, train), float)
+        r_twin = np.asarray(data.y, float) - twin
+        own = _compare(data, r_twin, r_fit, DEFAULT_MAX_ORDER)
+        found["against_twin_t"] = float(own.t_stat)
+        found["took_the_name"] = bool(own.significant(alpha, min_gain_frac, plain_gain=True, noise_units=True))
     if not found["took_the_name"]:
         return sel, found
     why = (f"{sel.reason}; but a force path beyond the catalog does: the force slewed at most {rate:.3g} N/s "

@@ -254,6 +254,7 @@ def test_rate_limited_actuator_is_found_beyond_the_catalog(tmp_path):
     assert res.verdict == "unexplained", what
     check = res.report["selection"]["force_path_check"]
     assert check["kind"] == "rate-limited force path" and check["took_the_name"], check
+    assert check["against_twin_t"] > 3.0, check        # the force path's gain, not the friction refit's
     assert check["parameters"]["rate_n_per_s"] == pytest.approx(rate, rel=0.10), check
     # what the rate limit leaves on the held-out rows is near the sensor noise (8 N*m)
     assert check["held_out_rmse"] < 0.6 * check["calibrated_held_out_rmse"], check
