@@ -168,7 +168,8 @@ class Diagnosis:
     diagnosis_rate: dict = field(default_factory=dict)   # decimation plan (diagnosis.decimation)
     diagnosis_sample: dict = field(default_factory=dict)  # windows of a long campaign (diagnosis.sample)
     inputs: dict = field(default_factory=dict)  # the inputs' noise: slip smoothed, noise floor (input_hold.InputNoise)
-    force_path_check: dict | None = None  # a force path beyond the catalog: second-order (named time mechanism) or rate-limited (none), force_dynamics.py
+    force_path_check: dict | None = None  # a force path beyond the catalog (force_dynamics.py): second-order
+    #                                       against a named time mechanism, rate-limited where nothing is named
 
     @property
     def gain_pct(self) -> float:

@@ -259,7 +259,8 @@ def none_or_rate_limit(data, sel, campaign, sigma_nm: float, alpha: float, min_g
     rate limit (one parameter, fitted with the friction correction on the training rows); when
     that predicts the held-out residual significantly better than the calibrated model (at
     ``alpha``, ``min_gain_frac`` of the innovation variance, and a lower plain held-out RMSE)
-    and than its twin (the friction correction refitted alone), the answer is ``unexplained``: an effect in the force path beyond the catalog, reported with
+    and than its twin (the friction correction refitted alone), the answer is ``unexplained``:
+    an effect in the force path beyond the catalog, reported with
     the rate found. Measured at magnitude seed 20261128, ``--quick``, seed 7: on
     actuator_rate_limit@few_long (a 23.5 kN/s limit) the calibrated model read `none`; the
     rate limit fits 24.0 kN/s, held-out t = 23.6, RMSE 26.5 -> 8.3 N*m. On the 13 `none`
