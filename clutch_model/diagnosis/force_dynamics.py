@@ -263,8 +263,8 @@ def none_or_rate_limit(data, sel, campaign, sigma_nm: float, alpha: float, min_g
     an effect in the force path beyond the catalog, reported with
     the rate found. Measured at magnitude seed 20261128, ``--quick``, seed 7: on
     actuator_rate_limit@few_long (a 23.5 kN/s limit) the calibrated model read `none`; the
-    rate limit fits 24.0 kN/s, held-out t = 23.6, RMSE 26.5 -> 8.3 N*m. On the 13 `none`
-    campaigns of seeds 1, 3 and 7 the largest t was 2.1."""
+    rate limit fits 24.0 kN/s, held-out t = 23.6, RMSE 26.5 -> 8.3 N*m. On the 39 `none`
+    campaigns (13 conditions x seeds 1, 3, 7) the largest t was 2.1."""
     from clutch_model.diagnosis.selection import Selection, _compare, residual
     from clutch_model.diagnosis.structure_test import DEFAULT_MAX_ORDER
 
