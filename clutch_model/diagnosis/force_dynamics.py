@@ -91,13 +91,16 @@ def _specs(delay_s: float) -> list:
             ParamSpec("damping", True, DAMPING_BOUNDS[0], DAMPING_BOUNDS[1], np.array([0.7]))]
 
 
-class SecondOrderObjective(CampaignObjective):
-    """x = [log f_n, log damping] followed by the friction correction; the base model's force
-    goes through the second-order path before the plant."""
+class ForcePathObjective(CampaignObjective):
+    """x = the force path's parameters (in their search transform) followed by the friction
+    correction; the base model's force goes through the path (``path_force``) before the plant."""
 
-    def __init__(self, base: ClutchModel, campaign, fit_mask, delay_s: float, noise_sigma_nm: float = 1.0):
-        super().__init__(base, campaign, fit_mask, None, _specs(delay_s), fit_friction=True,
-                         noise_sigma_nm=noise_sigma_nm)
+    def __init__(self, base: ClutchModel, campaign, fit_mask, specs, noise_sigma_nm: float = 1.0):
+        super().__init__(base, campaign, fit_mask, None, specs, fit_friction=True, noise_sigma_nm=noise_sigma_nm)
+
+    def path_force(self, values) -> np.ndarray:
+        """The force on the plant's rows through the path with parameter ``values`` (model units)."""
+        raise NotImplementedError
 
     def _predict_xs(self, xs) -> np.ndarray:
         """One simulation batch per force path: the parameter sets that differ only in the
@@ -107,12 +110,23 @@ class SecondOrderObjective(CampaignObjective):
         out = np.empty((xs.shape[0], pi.n_rows))
         groups: dict = {}
         for k, x in enumerate(xs):
-            groups.setdefault((float(x[0]), float(x[1])), []).append(k)
-        for (x0, x1), rows in groups.items():
-            force = second_order_force(pi.t, pi.force, pi.run_start, self.specs[0].from_x(x0), self.specs[1].from_x(x1))
+            groups.setdefault(tuple(float(v) for v in x[:self.n_mech]), []).append(k)
+        for path_x, rows in groups.items():
+            force = self.path_force([s.from_x(v) for s, v in zip(self.specs, path_x)])
             out[rows] = predict_campaign([self.model_at(xs[k]) for k in rows], replace(pi, force=force),
                                          energy0_j=0.0).torque_nm
         return out
+
+
+class SecondOrderObjective(ForcePathObjective):
+    """The second-order force path: x = [log f_n, log damping] then the friction correction."""
+
+    def __init__(self, base: ClutchModel, campaign, fit_mask, delay_s: float, noise_sigma_nm: float = 1.0):
+        super().__init__(base, campaign, fit_mask, _specs(delay_s), noise_sigma_nm=noise_sigma_nm)
+
+    def path_force(self, values) -> np.ndarray:
+        pi = self._plant_inputs
+        return second_order_force(pi.t, pi.force, pi.run_start, values[0], values[1])
 
 
 @dataclass
@@ -135,12 +149,18 @@ def fit_second_order(base: ClutchModel, campaign, fit_mask, delay_s: float, nois
     with the friction correction, on the training rows ``fit_mask``. Started from the best of
     START_DAMPINGS at the group delay ``delay_s`` of the mechanism it stands in for."""
     obj = SecondOrderObjective(base, campaign, fit_mask, delay_s, noise_sigma_nm)
-    xs = np.vstack([np.concatenate([[math.log(_start_f_n_hz(zeta, delay_s)), math.log(zeta)], np.zeros(N_CORR)])
-                    for zeta in START_DAMPINGS])
+    starts = [[math.log(_start_f_n_hz(zeta, delay_s)), math.log(zeta)] for zeta in START_DAMPINGS]
+    return _fit_from_best_start(obj, starts, max_nfev, "second_order_force_path")
+
+
+def _fit_from_best_start(obj: ForcePathObjective, starts, max_nfev: int, fit_id: str) -> SecondOrderFit:
+    """Least squares of ``obj`` from the best (on the training rows) of the path ``starts``
+    (search-transformed values; friction correction 0) -> the fitted force path."""
+    xs = np.vstack([np.concatenate([np.asarray(x0, float), np.zeros(N_CORR)]) for x0 in starts])
     sse = np.nansum(obj.data_residuals(obj.predict(xs)) ** 2, axis=1)
     x = solve_from(obj, xs[int(np.argmin(sse))], max_nfev)
     params = {s.name: s.from_x(x[j]) for j, s in enumerate(obj.specs)}
-    return SecondOrderFit(params, obj.model_at(x), obj.predict([x])[0])
+    return SecondOrderFit(params, obj.model_at(x), obj.predict([x])[0], id=fit_id)
 
 
 def named_or_force_dynamics(data, sel, campaign, sigma_nm: float, alpha: float, min_gain_frac: float,
@@ -211,27 +231,17 @@ def rate_limited_force(t, force, run_start, rate_n_per_s):
     return out
 
 
-class RateLimitObjective(CampaignObjective):
-    """x = [log rate] followed by the friction correction; the base model's force goes through
-    the slew-rate limit before the plant."""
+class RateLimitObjective(ForcePathObjective):
+    """The slew-rate-limited force path: x = [log rate] then the friction correction."""
 
     def __init__(self, base: ClutchModel, campaign, fit_mask, noise_sigma_nm: float = 1.0):
         specs = [ParamSpec("rate_n_per_s", True, RATE_BOUNDS_N_PER_S[0], RATE_BOUNDS_N_PER_S[1],
                            np.array([START_RATES_N_PER_S[1]]))]
-        super().__init__(base, campaign, fit_mask, None, specs, fit_friction=True, noise_sigma_nm=noise_sigma_nm)
+        super().__init__(base, campaign, fit_mask, specs, noise_sigma_nm=noise_sigma_nm)
 
-    def _predict_xs(self, xs) -> np.ndarray:
+    def path_force(self, values) -> np.ndarray:
         pi = self._plant_inputs
-        xs = np.atleast_2d(np.asarray(xs, float))
-        out = np.empty((xs.shape[0], pi.n_rows))
-        groups: dict = {}
-        for k, x in enumerate(xs):
-            groups.setdefault(float(x[0]), []).append(k)
-        for x0, rows in groups.items():
-            force = rate_limited_force(pi.t, pi.force, pi.run_start, self.specs[0].from_x(x0))
-            out[rows] = predict_campaign([self.model_at(xs[k]) for k in rows], replace(pi, force=force),
-                                         energy0_j=0.0).torque_nm
-        return out
+        return rate_limited_force(pi.t, pi.force, pi.run_start, values[0])
 
 
 def fit_rate_limit(base: ClutchModel, campaign, fit_mask, noise_sigma_nm: float = 1.0,
@@ -239,11 +249,8 @@ def fit_rate_limit(base: ClutchModel, campaign, fit_mask, noise_sigma_nm: float 
     """The slew-rate-limited force path on ``base``, jointly with the friction correction, on
     the training rows ``fit_mask``; started from the best of START_RATES_N_PER_S."""
     obj = RateLimitObjective(base, campaign, fit_mask, noise_sigma_nm)
-    xs = np.vstack([np.concatenate([[math.log(r)], np.zeros(N_CORR)]) for r in START_RATES_N_PER_S])
-    sse = np.nansum(obj.data_residuals(obj.predict(xs)) ** 2, axis=1)
-    x = solve_from(obj, xs[int(np.argmin(sse))], max_nfev)
-    params = {s.name: s.from_x(x[j]) for j, s in enumerate(obj.specs)}
-    return SecondOrderFit(params, obj.model_at(x), obj.predict([x])[0], id="rate_limited_force_path")
+    return _fit_from_best_start(obj, [[math.log(r)] for r in START_RATES_N_PER_S], max_nfev,
+                                "rate_limited_force_path")
 
 
 def none_or_rate_limit(data, sel, campaign, sigma_nm: float, alpha: float, min_gain_frac: float,
