@@ -130,21 +130,27 @@ class SecondOrderObjective(ForcePathObjective):
 
 
 @dataclass
-class SecondOrderFit:
-    """The rival fitted (a selection.Fitted): its parameters, the model it drives (friction
-    corrected; its force goes through the path) and its prediction on the whole campaign."""
+class ForcePathFit:
+    """A force path fitted (a selection.Fitted): its parameters, the model it drives (friction
+    corrected; its force goes through the path), its prediction on the whole campaign, and
+    its twin's (the friction correction refitted alone on the same rows, or None)."""
 
     parameters: dict
     model: ClutchModel
     predicted: np.ndarray
     id: str = "second_order_force_path"
+    twin_predicted: np.ndarray | None = None
 
     def predict(self, data=None) -> np.ndarray:
         return self.predicted
 
+    def without_mechanism(self) -> np.ndarray | None:
+        """The twin's prediction: what the friction correction fitted alongside gives alone."""
+        return self.twin_predicted
+
 
 def fit_second_order(base: ClutchModel, campaign, fit_mask, delay_s: float, noise_sigma_nm: float = 1.0,
-                     max_nfev: int = 40) -> SecondOrderFit:
+                     max_nfev: int = 40) -> ForcePathFit:
     """The second-order force path on ``base`` (its time mechanisms already taken out), jointly
     with the friction correction, on the training rows ``fit_mask``. Started from the best of
     START_DAMPINGS at the group delay ``delay_s`` of the mechanism it stands in for."""
@@ -153,14 +159,14 @@ def fit_second_order(base: ClutchModel, campaign, fit_mask, delay_s: float, nois
     return _fit_from_best_start(obj, starts, max_nfev, "second_order_force_path")
 
 
-def _fit_from_best_start(obj: ForcePathObjective, starts, max_nfev: int, fit_id: str) -> SecondOrderFit:
+def _fit_from_best_start(obj: ForcePathObjective, starts, max_nfev: int, fit_id: str) -> ForcePathFit:
     """Least squares of ``obj`` from the best (on the training rows) of the path ``starts``
     (search-transformed values; friction correction 0) -> the fitted force path."""
     xs = np.vstack([np.concatenate([np.asarray(x0, float), np.zeros(N_CORR)]) for x0 in starts])
     sse = np.nansum(obj.data_residuals(obj.predict(xs)) ** 2, axis=1)
     x = solve_from(obj, xs[int(np.argmin(sse))], max_nfev)
     params = {s.name: s.from_x(x[j]) for j, s in enumerate(obj.specs)}
-    return SecondOrderFit(params, obj.model_at(x), obj.predict([x])[0], id=fit_id)
+    return ForcePathFit(params, obj.model_at(x), obj.predict([x])[0], id=fit_id)
 
 
 def named_or_force_dynamics(data, sel, campaign, sigma_nm: float, alpha: float, min_gain_frac: float,
@@ -245,7 +251,7 @@ class RateLimitObjective(ForcePathObjective):
 
 
 def fit_rate_limit(base: ClutchModel, campaign, fit_mask, noise_sigma_nm: float = 1.0,
-                   max_nfev: int = 40) -> SecondOrderFit:
+                   max_nfev: int = 40) -> ForcePathFit:
     """The slew-rate-limited force path on ``base``, jointly with the friction correction, on
     the training rows ``fit_mask``; started from the best of START_RATES_N_PER_S."""
     obj = RateLimitObjective(base, campaign, fit_mask, noise_sigma_nm)
@@ -272,7 +278,7 @@ def none_or_rate_limit(data, sel, campaign, sigma_nm: float, alpha: float, min_g
     actuator_rate_limit@few_long (a 23.5 kN/s limit) the calibrated model read `none`; the
     rate limit fits 24.0 kN/s, held-out t = 23.6, RMSE 26.5 -> 8.3 N*m. On the 39 `none`
     campaigns (13 conditions x seeds 1, 3, 7) the largest t was 2.1."""
-    from clutch_model.diagnosis.selection import Selection, _compare, residual
+    from clutch_model.diagnosis.selection import Selection, _compare, _own_contribution, residual
     from clutch_model.diagnosis.structure_test import DEFAULT_MAX_ORDER
 
     if sel.verdict != "none":
@@ -293,10 +299,9 @@ def none_or_rate_limit(data, sel, campaign, sigma_nm: float, alpha: float, min_g
     found["took_the_name"] = bool(head.significant(alpha, min_gain_frac, plain_gain=True))
     if found["took_the_name"]:
         # its twin: the friction correction refitted alone, as the rate limit's was (the gain must
-        # be the force path's, not the refit's: selection._own_contribution)
-        twin = np.asarray(sel.final.context.friction_only(model, train), float)
-        r_twin = np.asarray(data.y, float) - twin
-        own = _compare(data, r_twin, r_fit, DEFAULT_MAX_ORDER)
+        # be the force path's, not the refit's), compared as every candidate's
+        fit.twin_predicted = np.asarray(sel.final.context.friction_only(model, train), float)
+        own, _ = _own_contribution(data, fit, DEFAULT_MAX_ORDER)
         found["against_twin_t"] = float(own.t_stat)
         found["took_the_name"] = bool(own.significant(alpha, min_gain_frac, plain_gain=True, noise_units=True))
     if not found["took_the_name"]:

@@ -726,6 +726,12 @@ def test_gain_over_the_twin_must_hold_on_most_held_out_pieces(monkeypatch):
     assert S.holds_on_most_pieces([[8.0, 9.0], [8.0, 9.0], [8.0, 9.0], [9.5, 9.0]])
     assert not S.holds_on_most_pieces([[8.0, 9.0], [8.0, 9.0], [9.5, 9.0], [9.5, 9.0]])
     assert not S.holds_on_most_pieces([[8.0, 9.0], [9.5, 9.0]])
+    # half of four: it holds when no one piece carries the gain (torque_offset@car#7, a real
+    # 34 N*m offset: far better on two spans, a little and more worse on the other two) ...
+    assert S.holds_on_most_pieces([[9.58, 9.35], [12.4, 32.4], [9.5, 22.4], [13.6, 10.3]])
+    # ... and not when one piece does, nor on half of two or three of three worse
+    assert not S.holds_on_most_pieces([[9.58, 9.35], [12.4, 32.4], [9.5, 10.0], [13.6, 10.3]])
+    assert not S.holds_on_most_pieces([[12.4, 32.4], [13.6, 10.3]])
 
     d, names, X, train, test, cols, eps, groups = _campaign(8, "white")
     y = 0.03 * cols["slip_power"] + eps
