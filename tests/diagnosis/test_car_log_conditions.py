@@ -444,3 +444,40 @@ def test_slip_power_fade_is_not_named_friction_degradation(tmp_path):
     assert res.judgement == "ok", what
     if res.verdict == "discovered":
         assert res.replay_rmse_nm["extended"] < res.replay_rmse_nm["calibrated"], res.replay_rmse_nm
+
+
+# A friction that follows pressure x pack temperature, on one 40 s drive with time spans held out:
+# the search found slip power and pressure x the energy dissipated since the campaign start
+# (held-out t = 11.7) and was named `discovered`; on the later bag the energy was beyond any it
+# was fitted on and the extended model was 47.5 N*m off against the calibrated model's 5.0
+# (-846 %). Held-out spans between fitted ones check an energy term only where it was fitted.
+def test_an_energy_term_that_spans_cannot_check_is_not_claimed(tmp_path):
+    camp = make_hidden_campaign("pressure_temperature_cross", "long_drive", 7, tmp_path / "campaign",
+                                magnitudes={"pressure_temperature_cross": 0.002431928105172907}, quick=True)
+    res = check_campaign(camp, tmp_path, mc_samples=MC_SAMPLES, stamps=False)
+    what = f"diagnose said {res.named_label}: {(res.report or {}).get('cause', {}).get('evidence', res.error)}"
+    assert res.judgement == "ok", what             # unexplained, or an extension beyond the catalog
+    cal, ext = res.replay_rmse_nm["calibrated"], res.replay_rmse_nm["extended"]
+    assert ext <= cal * (1 + 1e-9), f"{what}; unseen bags: calibrated {cal:.2f}, extended {ext:.2f} N*m"
+    if res.verdict == "discovered":
+        assert not any("energy" in term for term in res.report["cause"]["parameters"]), what
+
+
+# A 34 N*m torque offset on the quick car (AR(1) 0.9 noise, lock-up, two 20 s runs, four 3.3 s
+# spans held out): the offset was far better than its twin on two spans (12.4 against 32.4 and
+# 9.5 against 22.4 N*m) and worse on the other two (a tie, and the high-slip span), failed "better
+# on most pieces", and the drag was chosen with the offset as its lookalike (`unexplained`) until
+# half of four pieces held when no one piece carries the gain.
+def test_an_offset_far_better_on_half_the_spans_is_named(tmp_path):
+    offset = 34.35250068205923
+    camp = make_hidden_campaign("torque_offset", "car", 7, tmp_path / "campaign",
+                                magnitudes={"torque_offset": offset}, quick=True)
+    res = check_campaign(camp, tmp_path, mc_samples=MC_SAMPLES, stamps=False)
+    what = f"diagnose said {res.named_label}: {(res.report or {}).get('cause', {}).get('evidence', res.error)}"
+    assert named_causes(res.report) == ("torque_offset", ["torque_offset"]), what
+    got = res.report["cause"]["parameters"]["offset_nm"]
+    assert got == pytest.approx(offset, rel=0.15), what
+    lo, hi = res.report["cause"]["parameters_ci95"]["offset_nm"]
+    assert lo < offset < hi, what
+    cal, ext = res.replay_rmse_nm["calibrated"], res.replay_rmse_nm["extended"]
+    assert ext < 0.7 * cal, f"{what}; unseen bags: calibrated {cal:.2f}, extended {ext:.2f} N*m"

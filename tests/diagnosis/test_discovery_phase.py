@@ -39,17 +39,20 @@ def test_whole_windows_of_one_sampled_bag_are_not_a_bag_held_out():
     assert not held_out_whole_bags(np.zeros(300, np.int64), *_masks(np.r_[100:200]))
 
 
-def test_terms_in_the_dissipated_energy_alone_need_a_bag_held_out():
+def test_terms_in_the_dissipated_energy_need_a_bag_held_out():
     """Energy accumulates over the campaign like a clock: a term in it alone fits a friction
-    level that differs from run to run, which spans of the fitted runs share. Refused with
-    spans only; a term beside it that is not the energy's, or a whole bag held out, checks it."""
+    level that differs from run to run, which spans of the fitted runs share, and spans between
+    fitted ones never check it beyond the energies it was fitted on. Refused with spans only,
+    alone or beside other terms; a whole bag held out checks it."""
     from clutch_model.diagnosis.engine import energy_unchecked
 
     spans = held_out_whole_bags(BAG_OF_ROW, *_masks(np.r_[30:50, 130:150, 230:250]))
     why = energy_unchecked({"mu:energy": 1.86}, spans)
     assert "energy" in why and "mu:energy" in why and "whole run" in why
     assert energy_unchecked({"mu:energy": 1.86, "mu:slip_abs*energy": 0.1}, spans) != ""
-    assert energy_unchecked({"mu:slip_power@1.0s": -0.05, "mu:slip_abs*energy": 0.1}, spans) == ""
+    # beside another term, an energy term is still checked only where it was fitted
+    assert energy_unchecked({"mu:slip_power@1.0s": -0.05, "mu:slip_abs*energy": 0.1}, spans) != ""
+    assert energy_unchecked({"mu:slip_power@1.0s": -0.05, "mu:pressure*pack_temperature": 2e-3}, spans) == ""
     assert energy_unchecked({"mu:energy": 1.86}, True) == ""
     assert energy_unchecked({}, spans) == ""
 
