@@ -220,6 +220,13 @@ def test_car_log_condition_never_wrong(tmp_path, condition, case, seed, magnitud
     assert ext <= cal * (1 + 1e-9), f"{what}; unseen bags: calibrated {cal:.2f}, extended {ext:.2f} N*m"
 
 
+def _diagnosed(tmp_path, case, condition, seed, magnitudes):
+    """A quick campaign at fixed hidden magnitudes, diagnosed and replayed -> (result, what it said)."""
+    camp = make_hidden_campaign(case, condition, seed, tmp_path / "campaign", magnitudes=magnitudes, quick=True)
+    res = check_campaign(camp, tmp_path, mc_samples=MC_SAMPLES, stamps=False)
+    return res, f"diagnose said {res.named_label}: {(res.report or {}).get('cause', {}).get('evidence', res.error)}"
+
+
 # An actuator with inertia (a second-order force path, damping 0.7) is outside the catalog: a
 # transport delay of its group delay matches it to second order in frequency, the remainder after
 # the delay read as noise and the delay was named (a wrong name, +66-82 % on the unseen bags, on
@@ -227,10 +234,7 @@ def test_car_log_condition_never_wrong(tmp_path, condition, case, seed, magnitud
 # second-order force path fitted in its place (diagnosis/force_dynamics.py).
 @pytest.mark.parametrize("condition,seed,f_n_hz", [("lab", 2, 3.35), pytest.param("ar1", 2, 3.35, marks=pytest.mark.slow)])
 def test_second_order_actuator_is_not_named_a_catalog_time_mechanism(tmp_path, condition, seed, f_n_hz):
-    camp = make_hidden_campaign("actuator_second_order", condition, seed, tmp_path / "campaign",
-                                magnitudes={"actuator_second_order": f_n_hz}, quick=True)
-    res = check_campaign(camp, tmp_path, mc_samples=MC_SAMPLES, stamps=False)
-    what = f"diagnose said {res.named_label}: {(res.report or {}).get('cause', {}).get('evidence', res.error)}"
+    res, what = _diagnosed(tmp_path, "actuator_second_order", condition, seed, {"actuator_second_order": f_n_hz})
     assert res.verdict == "unexplained", what
     check = res.report["selection"]["force_path_check"]
     assert check["took_the_name"] and check["in_place_of"], check
@@ -247,10 +251,7 @@ def test_second_order_actuator_is_not_named_a_catalog_time_mechanism(tmp_path, c
 # where nothing was named (diagnosis/force_dynamics.py, none_or_rate_limit).
 def test_rate_limited_actuator_is_found_beyond_the_catalog(tmp_path):
     rate = 23485.80078697058
-    camp = make_hidden_campaign("actuator_rate_limit", "ar1", 7, tmp_path / "campaign",
-                                magnitudes={"actuator_rate_limit": rate}, quick=True)
-    res = check_campaign(camp, tmp_path, mc_samples=MC_SAMPLES, stamps=False)
-    what = f"diagnose said {res.named_label}: {(res.report or {}).get('cause', {}).get('evidence', res.error)}"
+    res, what = _diagnosed(tmp_path, "actuator_rate_limit", "ar1", 7, {"actuator_rate_limit": rate})
     assert res.verdict == "unexplained", what
     check = res.report["selection"]["force_path_check"]
     assert check["kind"] == "rate-limited force path" and check["took_the_name"], check
@@ -452,10 +453,8 @@ def test_slip_power_fade_is_not_named_friction_degradation(tmp_path):
 # was fitted on and the extended model was 47.5 N*m off against the calibrated model's 5.0
 # (-846 %). Held-out spans between fitted ones check an energy term only where it was fitted.
 def test_an_energy_term_that_spans_cannot_check_is_not_claimed(tmp_path):
-    camp = make_hidden_campaign("pressure_temperature_cross", "long_drive", 7, tmp_path / "campaign",
-                                magnitudes={"pressure_temperature_cross": 0.002431928105172907}, quick=True)
-    res = check_campaign(camp, tmp_path, mc_samples=MC_SAMPLES, stamps=False)
-    what = f"diagnose said {res.named_label}: {(res.report or {}).get('cause', {}).get('evidence', res.error)}"
+    res, what = _diagnosed(tmp_path, "pressure_temperature_cross", "long_drive", 7,
+                           {"pressure_temperature_cross": 0.002431928105172907})
     assert res.judgement == "ok", what             # unexplained, or an extension beyond the catalog
     cal, ext = res.replay_rmse_nm["calibrated"], res.replay_rmse_nm["extended"]
     assert ext <= cal * (1 + 1e-9), f"{what}; unseen bags: calibrated {cal:.2f}, extended {ext:.2f} N*m"
@@ -470,10 +469,7 @@ def test_an_energy_term_that_spans_cannot_check_is_not_claimed(tmp_path):
 # half of four pieces held when no one piece carries the gain.
 def test_an_offset_far_better_on_half_the_spans_is_named(tmp_path):
     offset = 34.35250068205923
-    camp = make_hidden_campaign("torque_offset", "car", 7, tmp_path / "campaign",
-                                magnitudes={"torque_offset": offset}, quick=True)
-    res = check_campaign(camp, tmp_path, mc_samples=MC_SAMPLES, stamps=False)
-    what = f"diagnose said {res.named_label}: {(res.report or {}).get('cause', {}).get('evidence', res.error)}"
+    res, what = _diagnosed(tmp_path, "torque_offset", "car", 7, {"torque_offset": offset})
     assert named_causes(res.report) == ("torque_offset", ["torque_offset"]), what
     got = res.report["cause"]["parameters"]["offset_nm"]
     assert got == pytest.approx(offset, rel=0.15), what
