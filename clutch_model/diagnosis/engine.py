@@ -728,9 +728,9 @@ def _discover(data: SelectionData, base, campaign: Campaign, bench_model: Clutch
     ``phase_unchecked``)."""
     say("discovery: searching terms beyond the catalog on the fitted data")
     dsel = _judge_checkable(data, base, campaign, bench_model, say, whole_bag_held_out)
-    accepted = dsel.verdict == "named" and bool(dsel.causes and dsel.causes[0].parameters)
+    terms = found_terms(dsel)
+    accepted = bool(terms)
     if accepted:
-        terms = dsel.causes[0].parameters
         why = (spans_cannot_check(terms, whole_bag_held_out)
                or phase_differs_between_runs(data, residual(data, base), terms)
                or energy_not_within_runs(data, base, dsel.causes[0].fitted, terms))
@@ -895,18 +895,29 @@ def _judge_checkable(data: SelectionData, base, campaign: Campaign, bench_model:
     off against the calibrated model's 5.0. When the search without them finds nothing, the
     first extension stays, and ``energy_unchecked`` refuses it."""
     from clutch_model.discovery.candidate import DiscoveryCandidate
-    from clutch_model.discovery.terms import default_library
 
     dsel = _judge_discovery(data, base, DiscoveryCandidate(campaign, bench_model=bench_model, progress=say), say)
-    terms = dsel.causes[0].parameters if dsel.verdict == "named" and dsel.causes else {}
+    terms = found_terms(dsel)
     if not energy_unchecked(terms, whole_bag_held_out):
         return dsel
     say(f"discovery: {', '.join(terms)} follow the dissipated energy, which held-out spans cannot check: "
         f"searching again without energy terms")
-    clockless = [t for t in default_library() if "energy" not in (t.a, t.b)]
     again = _judge_discovery(data, base, DiscoveryCandidate(campaign, bench_model=bench_model, progress=say,
-                                                            library=clockless), say)
-    return again if again.verdict == "named" and again.causes and again.causes[0].parameters else dsel
+                                                            library=energy_free_library()), say)
+    return again if found_terms(again) else dsel
+
+
+def found_terms(dsel: Selection) -> dict:
+    """The terms of the extension a discovery selection named ({} when it named none)."""
+    return dsel.causes[0].parameters if dsel.verdict == "named" and dsel.causes else {}
+
+
+def energy_free_library() -> list:
+    """Discovery's default terms without those in the energy dissipated so far (the reversible
+    ones): a fade against the irreversible degradation, or terms that held-out spans can check."""
+    from clutch_model.discovery.terms import default_library
+
+    return [t for t in default_library() if "energy" not in (t.a, t.b)]
 
 
 def _judge_discovery(data: SelectionData, base, cand, say) -> Selection:
@@ -934,7 +945,6 @@ def _degradation_or_fade(data: SelectionData, base, campaign: Campaign, bench_mo
     17.3 N*m -- the offset -- and the report read `discovered` for a catalog mechanism."""
     from clutch_model.diagnosis.structure_test import compare_residuals
     from clutch_model.discovery.candidate import DiscoveryCandidate
-    from clutch_model.discovery.terms import default_library
 
     others = [c for c in sel.causes if c.id != "friction_degradation"]
     fade_base = base
@@ -943,9 +953,8 @@ def _degradation_or_fade(data: SelectionData, base, campaign: Campaign, bench_mo
         fade_base, _ = refit_chain(data, base, [c.id for c in others], {c.id: c for c in cands}, refine=True)
     say("friction_degradation named: checking the reversible lookalike (slip-power fade) beyond the catalog"
         + (f" on top of {', '.join(c.id for c in others)}" if others else ""))
-    reversible = [t for t in default_library() if "energy" not in (t.a, t.b)]
     dsel = _judge_discovery(data, fade_base, DiscoveryCandidate(campaign, bench_model=bench_model, progress=say,
-                                                                library=reversible), say)
+                                                                library=energy_free_library()), say)
     found = dsel.causes[0] if dsel.verdict == "named" and dsel.causes else None
     if found is None or not found.parameters:
         return sel, None

@@ -536,7 +536,7 @@ def _swap_check(data, baseline, named, steps, cand_by_id, current, without, alph
                 looks += [(lk, rival) for lk, _, _ in untold if lk not in told]
                 step.lookalikes = [lk for lk in step.lookalikes if lk != rival and lk not in told | set(beaten)]
                 break
-            if _tells_apart(data, cause, named, resid_full, (rival, resid_r, causes_r), lookalike_alpha, max_order):
+            if _tells_apart(data, back, resid_full, resid_r, rival_dims, lookalike_alpha, max_order):
                 beaten.append(rival)
             else:
                 untold.append((rival, resid_r, causes_r))
@@ -559,13 +559,11 @@ def _rival_dimensions(cause, named: list, rival: str, causes_r: list) -> tuple:
     return (both if static else (None, None)), (both if dynamic else (None, None))
 
 
-def _tells_apart(data, cause, named: list, resid_named, untold_rival, lookalike_alpha, max_order) -> bool:
-    """Does the ``named`` model (residual ``resid_named``, ``cause`` among its causes) beat the
-    rival ``untold_rival`` ((id, residual with the rival in the cause's place, the rival's
-    causes)) head to head, or part from it? Then the rival is no lookalike of the cause."""
-    rival, resid_r, causes_r = untold_rival
-    dims, rival_dims = _rival_dimensions(cause, named, rival, causes_r)
-    back = _compare_rivals(data, resid_r, resid_named, dims[1], dims[0], max_order)
+def _tells_apart(data, back, resid_named, resid_r, rival_dims, lookalike_alpha, max_order) -> bool:
+    """Does the named model (residual ``resid_named``) beat a rival (residual ``resid_r``, the
+    rival in a cause's place) head to head (``back``: the comparison with the rival as the
+    null), or part from it (``rival_dims``: ``_rival_dimensions``)? Then the rival is no
+    lookalike of the cause."""
     return bool(_beats(back, lookalike_alpha)
                 or parts_rivals(data, resid_r, resid_named, *rival_dims[::-1], max_order))
 
@@ -580,7 +578,13 @@ def _told_apart(data, named: list, resid_named, cause_id: str, untold, lookalike
     lag tied with it, then the delay took its place; the sensor lag stayed a lookalike of the
     replaced lag and the answer read `unexplained`)."""
     cause = next(c for c in named if c.id == cause_id)
-    return {lk[0] for lk in untold if _tells_apart(data, cause, named, resid_named, lk, lookalike_alpha, max_order)}
+    told = set()
+    for rival, resid_r, causes_r in untold:
+        dims, rival_dims = _rival_dimensions(cause, named, rival, causes_r)
+        back = _compare_rivals(data, resid_r, resid_named, dims[1], dims[0], max_order)
+        if _tells_apart(data, back, resid_named, resid_r, rival_dims, lookalike_alpha, max_order):
+            told.add(rival)
+    return told
 
 
 def _refitted_friction_size(fit) -> int:
