@@ -105,11 +105,18 @@ class ModelFit:
         early held-out run where little energy had been dissipated yet, made that twin as good
         as the degradation there (12.07 vs 11.75 N*m, t = 2.3) while it was 26-29 N*m on the
         later training runs. A fit with the friction as it was keeps the mechanism-removed
-        twin (its base)."""
+        twin (its base).
+
+        A cause refitted with the others in the model (selection's backfitting) starts from a
+        base that holds its own mechanism as first fitted; the twin leaves that out too, or it
+        would keep the mechanism at its earlier size and measure only the change of it."""
         if self.id == "baseline":
             return None
         if self.fit.joint:
-            return self.context.friction_only(self.base_model, self.mask)
+            base = self.base_model
+            if any(m.id == self.id for m in base.mechanisms):
+                base = base.with_mechanisms([m for m in base.mechanisms if m.id != self.id])
+            return self.context.friction_only(base, self.mask)
         from clutch_model.prediction import predict_campaign
 
         # with co-fitted mechanisms moved, the twin is the model they were moved from

@@ -1094,6 +1094,14 @@ def _backfitted_second(data, resid_cur, named, step2: SelectionStep, cand_by_id,
             f"{pair.t_stat:.1f}" + (f"; {coarse}" if coarse else ""))
         if coarse or not pair.significant(alpha / len(tried), min_gain_frac, plain_gain):
             continue
+        # the second cause as refitted must beat its mechanism-free twin, as in a forward step
+        second = CandidateScore(sc.id, causes[1].fitted, pair)
+        if not _nameable(data, second, alpha / len(tried), min_gain_frac, plain_gain, max_order):
+            own = second.own
+            say(f"  {sc.id} as refitted does not beat its twin" + (
+                "" if own is False else f" (held-out t = {own.t_stat:.1f}, plain RMSE {own.rmse_null:.2f} -> "
+                                        f"{own.rmse_alt:.2f} N*m, innovation variance {-100 * own.gain_frac:+.2f} %)"))
+            continue
         if best is None or pair.delta_ll > best[0].delta_ll:
             causes[1].comparison = pair
             best = (pair, causes, model)
