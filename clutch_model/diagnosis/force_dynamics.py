@@ -198,7 +198,10 @@ def named_or_force_dynamics(data, sel, campaign, sigma_nm: float, alpha: float, 
     final model; when it predicts the held-out residual significantly better than the named
     model (at ``alpha``, ``min_gain_frac`` of the innovation variance, and a plain held-out
     RMSE no larger), the named mechanism is a lookalike of a force path outside the catalog
-    and the verdict is ``unexplained``, the named causes the closest, with what they leave."""
+    and the verdict is ``unexplained``, the named causes the closest, with what they leave.
+    The rival's friction correction is refitted with it, so when it beats the named model it
+    must also beat the named mechanism refitted the same way (``_named_refitted``); the weaker
+    of the two comparisons decides."""
     from clutch_model.diagnosis.selection import Selection, _compare, residual
     from clutch_model.diagnosis.structure_test import DEFAULT_MAX_ORDER
 
@@ -221,7 +224,7 @@ def named_or_force_dynamics(data, sel, campaign, sigma_nm: float, alpha: float, 
         # the rival's friction correction was refitted with it: it meets the named mechanism
         # refitted the same way too, so that what it wins is the force path's
         head_even = _compare(data, residual(data, even), r_rival, DEFAULT_MAX_ORDER)
-        say(f"second-order force path against {', '.join(timed)} refitted with the friction as it was: "
+        say(f"second-order force path against {', '.join(timed)} refitted with the friction correction: "
             f"t = {head_even.t_stat:.1f}, RMSE {head_even.rmse_alt:.2f} vs {head_even.rmse_null:.2f} N*m")
         if head_even.t_stat < head.t_stat:
             head = head_even
