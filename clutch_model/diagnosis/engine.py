@@ -955,9 +955,9 @@ def _degradation_or_fade(data: SelectionData, base, campaign: Campaign, bench_mo
         + (f" on top of {', '.join(c.id for c in others)}" if others else ""))
     dsel = _judge_discovery(data, fade_base, DiscoveryCandidate(campaign, bench_model=bench_model, progress=say,
                                                                 library=energy_free_library()), say)
-    found = dsel.causes[0] if dsel.verdict == "named" and dsel.causes else None
-    if found is None or not found.parameters:
+    if not found_terms(dsel):
         return sel, None
+    found = dsel.causes[0]
     r_deg = residual(data, sel.final)
     r_fade = residual(data, found.fitted)
     fade_better = compare_residuals(r_deg, r_fade, data.train_mask, data.test_mask, data.run_start, data.t)

@@ -169,11 +169,11 @@ def _fit_from_best_start(obj: ForcePathObjective, starts, max_nfev: int, fit_id:
     return ForcePathFit(params, obj.model_at(x), obj.predict([x])[0], id=fit_id)
 
 
-def _named_refitted(sel, base: ClutchModel, stand_in: list, campaign, train) -> ForcePathFit | None:
+def _named_refitted(sel, base: ClutchModel, stand_in: list, train):
     """The named time mechanism refitted jointly with the friction correction from ``base`` (the
     final model without its time mechanisms) on the training rows, as the second-order rival
     is: the rival's equal. None when the final model is no catalog fit or more than one time
-    mechanism is named.
+    mechanism is named. -> candidates.ModelFit or None.
 
     Measured on actuator_lag+friction_degradation@long_drive#7 (``--quick``, magnitude seed
     20261128: a 78 ms lag and a friction decline, one 40 s drive): the rival fitted 20.8 Hz at
@@ -183,11 +183,11 @@ def _named_refitted(sel, base: ClutchModel, stand_in: list, campaign, train) -> 
     ctx = getattr(sel.final, "context", None)
     if ctx is None or len(stand_in) != 1:
         return None
-    from clutch_model.diagnosis.candidates import fit_alone
+    from clutch_model.diagnosis.candidates import ModelFit, fit_alone
 
     mech = stand_in[0]
-    fit = fit_alone(ctx, mech.id, base, train, joint=True, start=dict(mech.values))
-    return ForcePathFit(dict(fit.parameters), fit.model, np.asarray(fit.predicted, float), id=mech.id)
+    return ModelFit(mech.id, fit_alone(ctx, mech.id, base, train, joint=True, start=dict(mech.values)),
+                    base, ctx, train)
 
 
 def named_or_force_dynamics(data, sel, campaign, sigma_nm: float, alpha: float, min_gain_frac: float,
@@ -218,17 +218,17 @@ def named_or_force_dynamics(data, sel, campaign, sigma_nm: float, alpha: float, 
     r_rival = residual(data, fit)
     head = _compare(data, r_named, r_rival, DEFAULT_MAX_ORDER)
     found_against = ", ".join(timed)
-    even = (_named_refitted(sel, base, stand_in, campaign, np.asarray(data.train_mask, bool))
+    even = (_named_refitted(sel, base, stand_in, np.asarray(data.train_mask, bool))
             if head.significant(alpha, min_gain_frac, plain_gain=True) else None)
     if even is not None:
         # the rival's friction correction was refitted with it: it meets the named mechanism
         # refitted the same way too, so that what it wins is the force path's
         head_even = _compare(data, residual(data, even), r_rival, DEFAULT_MAX_ORDER)
-        say(f"second-order force path against {', '.join(timed)} refitted with the friction correction: "
-            f"t = {head_even.t_stat:.1f}, RMSE {head_even.rmse_alt:.2f} vs {head_even.rmse_null:.2f} N*m")
+        refitted = f"{', '.join(timed)} refitted with the friction correction"
+        say(f"second-order force path against {refitted}: t = {head_even.t_stat:.1f}, "
+            f"RMSE {head_even.rmse_alt:.2f} vs {head_even.rmse_null:.2f} N*m")
         if head_even.t_stat < head.t_stat:
-            head = head_even
-            found_against = f"{', '.join(timed)} refitted with the friction"
+            head, found_against = head_even, refitted
     found = {"parameters": {k: float(v) for k, v in fit.parameters.items()}, "in_place_of": timed,
              "held_out_t": float(head.t_stat), "held_out_p": float(head.p_value),
              "innovation_variance_cut": float(head.gain_frac),
