@@ -39,6 +39,7 @@ from clutch_model.diagnosis.input_hold import decide_input_noise, with_midpoint_
 from clutch_model.diagnosis.lockup import without_locked_torque
 from clutch_model.diagnosis.run_level import within_run_forecast
 from clutch_model.diagnosis.force_dynamics import named_or_force_dynamics, none_or_rate_limit
+from clutch_model.diagnosis.bench_anchor import named_and_bench_anchored, none_or_bench_anchored
 from clutch_model.diagnosis.fitting import CANDIDATE_IDS, CandidateFit, fit_candidate
 from clutch_model.diagnosis.noise_model import fit_noise_model, white_floor
 from clutch_model.diagnosis.selection import (Selection, SelectionData, leaves_of, refit_chain, residual,
@@ -170,6 +171,7 @@ class Diagnosis:
     inputs: dict = field(default_factory=dict)  # the inputs' noise: slip smoothed, noise floor (input_hold.InputNoise)
     force_path_check: dict | None = None  # a force path beyond the catalog (force_dynamics.py): second-order
     #                                       against a named time mechanism, rate-limited where nothing is named
+    bench_anchor: dict | None = None      # nothing named: a cause the calibration absorbed (bench_anchor.py)
 
     @property
     def gain_pct(self) -> float:
@@ -512,6 +514,12 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
     t0 = time.perf_counter()
     sel, force_dynamics = named_or_force_dynamics(data, sel, campaign, sigma_guess, ALPHA, NAMED_GAIN_FRAC, say)
     timings["force dynamics"] = time.perf_counter() - t0
+    # one cause named: a second one the car calibration absorbed beside it (bench_anchor.py)
+    bench_anchor = None
+    if cal_base is not bench_model:
+        t0 = time.perf_counter()
+        sel, bench_anchor = named_and_bench_anchored(data, sel, ctx, bench_model, ids, ALPHA, NAMED_GAIN_FRAC, say)
+        timings["bench anchor"] = time.perf_counter() - t0
 
     first = sel.steps[0].scores if sel.steps else []
     fits = []
@@ -561,6 +569,12 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
         sel, rate_limit = none_or_rate_limit(data, sel, campaign, sigma_guess, ALPHA, NAMED_GAIN_FRAC, say)
         force_dynamics = force_dynamics or rate_limit
         timings["force dynamics"] += time.perf_counter() - t0
+
+    # still nothing: a cause the car calibration absorbed, seen against the bench (bench_anchor.py)
+    if sel.verdict == "none" and not (discovery is not None and discovery.accepted) and cal_base is not bench_model:
+        t0 = time.perf_counter()
+        sel, bench_anchor = none_or_bench_anchored(data, sel, ctx, bench_model, ids, ALPHA, NAMED_GAIN_FRAC, say)
+        timings["bench anchor"] = time.perf_counter() - t0
 
     # -- stage 4: extend ------------------------------------------------------------------------
     cause = {"named": None, "none": "none", "unexplained": "unexplained"}[sel.verdict]
@@ -622,7 +636,8 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
                   split=split, fit_mask=fit_mask, eval_mask=eval_mask, locked_rows=int(locked.sum()),
                   noise=noise, bench_info=bench_info or {}, calibration_info=calibration_info, timings=timings,
                   discovery=discovery, diagnosis_rate=diagnosis_rate, diagnosis_sample=sample_info,
-                  inputs=inputs, force_path_check=force_dynamics)
+                  inputs=inputs, force_path_check=force_dynamics,
+                  bench_anchor=bench_anchor)
     emit("selected", diagnosis=d)
     return d
 

@@ -18,6 +18,7 @@ CLUTCH_HIDDEN_SEED=<int> draws other magnitudes. bench/bench_diagnose_matrix.py 
 matrix (every mechanism, pairs, lookalikes x every condition x seeds).
 """
 import csv
+import json
 import os
 
 import numpy as np
@@ -493,3 +494,23 @@ def test_a_lag_is_not_taken_by_a_force_path_that_refits_the_friction(tmp_path):
     assert "actuator_lag" in named_causes(res.report)[1], what
     tau = next(c for c in res.report["causes"] if c["id"] == "actuator_lag")["parameters"]["tau_s"]
     assert tau == pytest.approx(0.0784, rel=0.1), what
+
+
+# A friction decline (10 % over the seen drive) on one 40 s drive with four 3.3 s spans held out:
+# the pack heats as the energy is dissipated, the car calibration moved mu_C's temperature slope
+# and took the decline as a temperature effect (held-out 8.24 N*m against 8.0 of noise), nothing
+# predicted the held-out residual and the answer read `none`; on the later drive, after the pack
+# had cooled, the calibrated model was 38 N*m off. The bench measured that temperature slope: on
+# the bench friction the model is 20.0 N*m off on the held-out spans, and the degradation on the
+# bench friction closes 99 % of that (diagnosis/bench_anchor.py).
+def test_a_decline_the_calibration_took_as_temperature_is_found_against_the_bench(tmp_path):
+    res, what = _diagnosed(tmp_path, "friction_degradation", "long_drive", 7,
+                           {"friction_degradation": 0.10000241666398738})
+    assert named_causes(res.report) == ("friction_degradation", ["friction_degradation"]), what
+    check = res.report["selection"]["bench_anchor"]
+    assert check["absorbed"] and check["named"] == "friction_degradation", what
+    truth = json.loads((tmp_path / "campaign" / "truth.json").read_text())["mechanisms"][0]["energy_scale_j"]
+    got = res.report["cause"]["parameters"]["energy_scale_j"]
+    assert got == pytest.approx(truth, rel=0.1), what
+    cal, ext = res.replay_rmse_nm["calibrated"], res.replay_rmse_nm["extended"]
+    assert ext < 0.2 * cal, f"{what}; unseen bags: calibrated {cal:.2f}, extended {ext:.2f} N*m"
