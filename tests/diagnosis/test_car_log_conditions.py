@@ -494,6 +494,12 @@ def test_a_lag_is_not_taken_by_a_force_path_that_refits_the_friction(tmp_path):
     assert "actuator_lag" in named_causes(res.report)[1], what
     tau = next(c for c in res.report["causes"] if c["id"] == "actuator_lag")["parameters"]["tau_s"]
     assert tau == pytest.approx(0.0784, rel=0.1), what
+    # the decline beside it, which the calibration took as a temperature effect, is found against
+    # the bench since stop 43 (diagnosis/bench_anchor.py)
+    assert "friction_degradation" in named_causes(res.report)[1], what
+    assert res.report["selection"]["bench_anchor"]["named"] == "friction_degradation", what
+    cal, ext = res.replay_rmse_nm["calibrated"], res.replay_rmse_nm["extended"]
+    assert ext < 0.2 * cal, f"{what}; unseen bags: calibrated {cal:.2f}, extended {ext:.2f} N*m"
 
 
 # A friction decline (10 % over the seen drive) on one 40 s drive with four 3.3 s spans held out:
