@@ -51,74 +51,107 @@ def _closed_share(cmp_gap, cmp_vs_bench) -> float:
     return float(closed / gap) if gap > 0 else 0.0
 
 
+class _Check:
+    """One bench-anchor check: the model on the bench friction (residual ``r_bench``) against
+    the calibrated one (``r_cal``) on the held-out rows, and the mechanisms tried there."""
+
+    def __init__(self, data, r_bench, r_cal, alpha: float, min_gain_frac: float, **about):
+        from clutch_model.diagnosis.selection import _compare
+        from clutch_model.diagnosis.structure_test import DEFAULT_MAX_ORDER
+
+        self.data, self.r_bench, self.r_cal = data, r_bench, r_cal
+        self.alpha, self.min_gain_frac = alpha, min_gain_frac
+        self.compare = lambda null, alt: _compare(data, null, alt, DEFAULT_MAX_ORDER)
+        self.gap = gap = self.compare(r_bench, r_cal)
+        gap_frac = (gap.rmse_null / gap.rmse_alt) ** 2 - 1.0 if gap.rmse_alt > 0 else 0.0
+        self.absorbed = bool(gap_frac >= BENCH_GAP_FRAC and self.significant(gap))
+        self.found = {**about, "bench_held_out_rmse": float(gap.rmse_null),
+                      "calibrated_held_out_rmse": float(gap.rmse_alt), "calibration_t": float(gap.t_stat),
+                      "gap_frac": float(gap_frac), "absorbed": self.absorbed, "mechanisms": {}}
+        self.passing = []
+
+    def significant(self, cmp) -> bool:
+        return cmp.significant(self.alpha, self.min_gain_frac, plain_gain=True)
+
+    def gap_text(self) -> str:
+        return f"held-out RMSE {self.gap.rmse_null:.2f} N*m against {self.gap.rmse_alt:.2f} calibrated"
+
+    def tries(self, cid: str, fitted, label: str, say) -> None:
+        """``fitted`` (a model with ``cid`` on the bench friction): does it account for the gap?"""
+        from clutch_model.diagnosis.selection import residual
+
+        r = residual(self.data, fitted)
+        vs_bench = self.compare(self.r_bench, r)
+        vs_cal = self.compare(r, self.r_cal)              # is the calibrated model better?
+        share = _closed_share(self.gap, vs_bench)
+        ok = self.significant(vs_bench) and share >= GAP_SHARE
+        self.found["mechanisms"][cid] = {"parameters": {k: float(v) for k, v in fitted.parameters.items()},
+                                         "held_out_rmse": float(vs_bench.rmse_alt),
+                                         "against_bench_t": float(vs_bench.t_stat), "gap_closed": share,
+                                         "calibrated_better_t": float(vs_cal.t_stat), "accounts_for_it": bool(ok)}
+        say(f"  {label}: held-out RMSE {vs_bench.rmse_alt:.2f} N*m, {share:.0%} of the gap (t = {vs_bench.t_stat:.1f}); "
+            f"calibrated better t = {vs_cal.t_stat:.1f}" + ("  <- accounts for it" if ok else ""))
+        if ok:
+            self.passing.append((float(vs_bench.rmse_alt), cid, fitted, r, vs_bench))
+
+    def chosen(self):
+        """-> (best (cid, fitted, comparison against the bench model) or None, the runner-up's id when
+        the held-out rows do not tell the two apart, else None)."""
+        if not self.passing:
+            return None, None
+        ranked = sorted(self.passing, key=lambda p: p[0])
+        _, cid, fitted, r, vs_bench = ranked[0]
+        if len(ranked) > 1:
+            _, cid2, _, r2, _ = ranked[1]
+            head = self.compare(r2, r)
+            self.found["runner_up"] = {"id": cid2, "held_out_t": float(head.t_stat)}
+            if not self.significant(head):
+                return (cid, fitted, vs_bench), cid2
+        self.found["named"] = cid
+        return (cid, fitted, vs_bench), None
+
+
 def none_or_bench_anchored(data, sel, ctx, bench_model, candidate_ids, alpha: float, min_gain_frac: float,
                            say=lambda msg: None):
     """A selection that named nothing, checked for a cause the calibration absorbed (module doc)
     -> (selection, what the check found: a dict for the report, or None when it did not run)."""
     from clutch_model.diagnosis.candidates import ModelFit, fit_alone
-    from clutch_model.diagnosis.selection import Cause, Selection, _compare, parameter_ci95, residual
+    from clutch_model.diagnosis.selection import Cause, Selection, parameter_ci95, residual
     from clutch_model.diagnosis.structure_test import DEFAULT_MAX_ORDER
 
     if sel.verdict != "none" or bench_model is None:
         return sel, None
     train = np.asarray(data.train_mask, bool)
     bench_base = bench_model.with_mechanisms(list(sel.final.model.mechanisms))
-    r_cal = residual(data, sel.final)
-    bench = _bench_alone(ctx, bench_base, train)
-    r_bench = residual(data, bench)
-    gap = _compare(data, r_bench, r_cal, DEFAULT_MAX_ORDER)
-    gap_frac = (gap.rmse_null / gap.rmse_alt) ** 2 - 1.0 if gap.rmse_alt > 0 else 0.0
-    found = {"bench_held_out_rmse": float(gap.rmse_null), "calibrated_held_out_rmse": float(gap.rmse_alt),
-             "calibration_t": float(gap.t_stat), "gap_frac": float(gap_frac), "mechanisms": {}}
-    absorbed = gap_frac >= BENCH_GAP_FRAC and gap.significant(alpha, min_gain_frac, plain_gain=True)
-    found["absorbed"] = bool(absorbed)
-    if not absorbed:
-        return sel, found
-    say(f"nothing named, but the calibration absorbed a discrepancy: held-out RMSE {gap.rmse_null:.2f} N*m on the "
-        f"bench friction against {gap.rmse_alt:.2f} calibrated; each mechanism on the bench friction")
-    passing = []
+    check = _Check(data, residual(data, _bench_alone(ctx, bench_base, train)), residual(data, sel.final),
+                   alpha, min_gain_frac)
+    if not check.absorbed:
+        return sel, check.found
+    say(f"nothing named, but the calibration absorbed a discrepancy ({check.gap_text()} on the bench friction); "
+        f"each mechanism on the bench friction")
     for cid in candidate_ids:
         fitted = ModelFit(cid, fit_alone(ctx, cid, bench_base, train), bench_base, ctx, train.copy())
-        r = residual(data, fitted)
-        vs_bench = _compare(data, r_bench, r, DEFAULT_MAX_ORDER)
-        vs_cal = _compare(data, r, r_cal, DEFAULT_MAX_ORDER)      # is the calibrated model better?
-        share = _closed_share(gap, vs_bench)
-        ok = vs_bench.significant(alpha, min_gain_frac, plain_gain=True) and share >= GAP_SHARE
-        found["mechanisms"][cid] = {"parameters": {k: float(v) for k, v in fitted.parameters.items()},
-                                    "held_out_rmse": float(vs_bench.rmse_alt), "against_bench_t": float(vs_bench.t_stat),
-                                    "gap_closed": share, "calibrated_better_t": float(vs_cal.t_stat),
-                                    "accounts_for_it": bool(ok)}
-        say(f"  {cid} on the bench friction: held-out RMSE {vs_bench.rmse_alt:.2f} N*m, {share:.0%} of the gap "
-            f"(t = {vs_bench.t_stat:.1f}); calibrated better t = {vs_cal.t_stat:.1f}" + ("  <- accounts for it" if ok else ""))
-        if ok:
-            passing.append((float(vs_bench.rmse_alt), cid, fitted, r, vs_bench))
-    passing.sort(key=lambda p: p[0])
-    if not passing:
-        return sel, found
-    _, cid, fitted, r, vs_bench = passing[0]
-    if len(passing) > 1:
-        _, cid2, _, r2, _ = passing[1]
-        head = _compare(data, r2, r, DEFAULT_MAX_ORDER)
-        found["runner_up"] = {"id": cid2, "held_out_t": float(head.t_stat)}
-        if not head.significant(alpha, min_gain_frac, plain_gain=True):
-            why = (f"{sel.reason}; but the calibration absorbed a discrepancy with the bench's friction (held-out "
-                   f"RMSE {gap.rmse_null:.2f} N*m on the bench friction against {gap.rmse_alt:.2f}) that {cid} and "
-                   f"{cid2} on the bench friction each account for, and the held-out rows do not tell them apart "
-                   f"(t = {head.t_stat:.1f})")
-            left = {"held_out_rmse": float(vs_bench.rmse_alt), "bench_anchor": found}
-            return (Selection("unexplained", [], sel.steps, sel.final, sel.baseline_structure,
-                              sel.remainder_structure, [cid, cid2], left, why, sel.run_level), found)
-    found["named"] = cid
+        check.tries(cid, fitted, f"{cid} on the bench friction", say)
+    best, untold = check.chosen()
+    if best is None:
+        return sel, check.found
+    cid, fitted, vs_bench = best
+    if untold is not None:
+        why = (f"{sel.reason}; but the calibration absorbed a discrepancy with the bench's friction "
+               f"({check.gap_text()}) that {cid} and {untold} on the bench friction each account for, and the "
+               f"held-out rows do not tell them apart (t = {check.found['runner_up']['held_out_t']:.1f})")
+        left = {"held_out_rmse": float(vs_bench.rmse_alt), "bench_anchor": check.found}
+        return (Selection("unexplained", [], sel.steps, sel.final, sel.baseline_structure,
+                          sel.remainder_structure, [cid, untold], left, why, sel.run_level), check.found)
     say(f"95 % intervals of {cid} (on the bench friction)")
     ci = parameter_ci95(None, fitted, data, None, max_order=DEFAULT_MAX_ORDER)
     why = (f"nothing predicts the held-out residual of the calibrated model, but the calibration absorbed a "
-           f"discrepancy with the friction the bench measured (held-out RMSE {gap.rmse_null:.2f} N*m on the bench "
-           f"friction against {gap.rmse_alt:.2f}, t = {gap.t_stat:.1f}); {cid} on the bench friction accounts for "
-           f"{_closed_share(gap, vs_bench):.0%} of it ({vs_bench.rmse_alt:.2f} N*m, t = {vs_bench.t_stat:.1f}) with the "
-           f"friction as the bench measured it")
+           f"discrepancy with the friction the bench measured ({check.gap_text()}, t = {check.gap.t_stat:.1f}); "
+           f"{cid} on the bench friction accounts for {_closed_share(check.gap, vs_bench):.0%} of it "
+           f"({vs_bench.rmse_alt:.2f} N*m, t = {vs_bench.t_stat:.1f}) with the friction as the bench measured it")
     cause = Cause(cid, fitted, dict(fitted.parameters), ci, vs_bench)
     named = replace(sel, verdict="named", causes=[cause], final=fitted, reason=why, closest=[], closest_leaves={})
-    return named, found
+    return named, check.found
 
 
 def named_and_bench_anchored(data, sel, ctx, bench_model, candidate_ids, alpha: float, min_gain_frac: float,
@@ -131,30 +164,21 @@ def named_and_bench_anchored(data, sel, ctx, bench_model, candidate_ids, alpha: 
     On actuator_lag+friction_degradation over one 40 s drive the selection named the lag and
     the calibration had taken the decline as a temperature effect."""
     from clutch_model.diagnosis.candidates import ModelFit, fit_alone
-    from clutch_model.diagnosis.selection import Cause, _compare, parameter_ci95, residual
+    from clutch_model.diagnosis.selection import Cause, parameter_ci95, residual
     from clutch_model.diagnosis.structure_test import DEFAULT_MAX_ORDER
 
     if sel.verdict != "named" or len(sel.causes) != 1 or bench_model is None:
         return sel, None
     first = sel.causes[0].id
     train = np.asarray(data.train_mask, bool)
-    others = [m for m in sel.final.model.mechanisms if m.id != first]
-    bench_base = bench_model.with_mechanisms(others)
+    bench_base = bench_model.with_mechanisms([m for m in sel.final.model.mechanisms if m.id != first])
     named_on_bench = ModelFit(first, fit_alone(ctx, first, bench_base, train), bench_base, ctx, train.copy())
-    r_final = residual(data, sel.final)
-    r_named = residual(data, named_on_bench)
-    gap = _compare(data, r_named, r_final, DEFAULT_MAX_ORDER)
-    gap_frac = (gap.rmse_null / gap.rmse_alt) ** 2 - 1.0 if gap.rmse_alt > 0 else 0.0
-    found = {"beside": first, "bench_held_out_rmse": float(gap.rmse_null),
-             "calibrated_held_out_rmse": float(gap.rmse_alt), "calibration_t": float(gap.t_stat),
-             "gap_frac": float(gap_frac), "mechanisms": {}}
-    absorbed = gap_frac >= BENCH_GAP_FRAC and gap.significant(alpha, min_gain_frac, plain_gain=True)
-    found["absorbed"] = bool(absorbed)
-    if not absorbed:
-        return sel, found
-    say(f"{first} named, but the calibration absorbed a discrepancy beside it: held-out RMSE {gap.rmse_null:.2f} N*m "
-        f"with {first} on the bench friction against {gap.rmse_alt:.2f} calibrated; each mechanism beside it there")
-    passing = []
+    check = _Check(data, residual(data, named_on_bench), residual(data, sel.final), alpha, min_gain_frac,
+                   beside=first)
+    if not check.absorbed:
+        return sel, check.found
+    say(f"{first} named, but the calibration absorbed a discrepancy beside it ({check.gap_text()} with {first} on "
+        f"the bench friction); each mechanism beside it there")
     for cid in candidate_ids:
         if cid == first:
             continue
@@ -162,28 +186,11 @@ def named_and_bench_anchored(data, sel, ctx, bench_model, candidate_ids, alpha: 
         first_again = fit_alone(ctx, first, second.model, train)
         both_base = first_again.model.with_mechanisms([m for m in first_again.model.mechanisms if m.id != cid])
         pair = ModelFit(cid, fit_alone(ctx, cid, both_base, train), both_base, ctx, train.copy())
-        r = residual(data, pair)
-        vs_named = _compare(data, r_named, r, DEFAULT_MAX_ORDER)
-        share = _closed_share(gap, vs_named)
-        ok = vs_named.significant(alpha, min_gain_frac, plain_gain=True) and share >= GAP_SHARE
-        found["mechanisms"][cid] = {"parameters": {k: float(v) for k, v in pair.parameters.items()},
-                                    "held_out_rmse": float(vs_named.rmse_alt), "against_bench_t": float(vs_named.t_stat),
-                                    "gap_closed": share, "accounts_for_it": bool(ok)}
-        say(f"  {cid} beside {first} on the bench friction: held-out RMSE {vs_named.rmse_alt:.2f} N*m, {share:.0%} of "
-            f"the gap (t = {vs_named.t_stat:.1f})" + ("  <- accounts for it" if ok else ""))
-        if ok:
-            passing.append((float(vs_named.rmse_alt), cid, pair, r, vs_named))
-    passing.sort(key=lambda p: p[0])
-    if not passing:
-        return sel, found
-    _, cid, pair, r, vs_named = passing[0]
-    if len(passing) > 1:
-        _, cid2, _, r2, _ = passing[1]
-        head = _compare(data, r2, r, DEFAULT_MAX_ORDER)
-        found["runner_up"] = {"id": cid2, "held_out_t": float(head.t_stat)}
-        if not head.significant(alpha, min_gain_frac, plain_gain=True):
-            return sel, found          # the named cause stands; what else the calibration took is not told apart
-    found["named"] = cid
+        check.tries(cid, pair, f"{cid} beside {first} on the bench friction", say)
+    best, untold = check.chosen()
+    if best is None or untold is not None:
+        return sel, check.found        # the named cause stands; what else the calibration took is not told apart
+    cid, pair, vs_named = best
     first_params = {k: float(v) for m in pair.model.mechanisms if m.id == first for k, v in m.values.items()
                     if k in sel.causes[0].parameters}
     first_base = pair.model.with_mechanisms([m for m in pair.model.mechanisms if m.id != first])
@@ -195,7 +202,7 @@ def named_and_bench_anchored(data, sel, ctx, bench_model, candidate_ids, alpha: 
               Cause(cid, pair, dict(pair.parameters), parameter_ci95(None, pair, data, None, max_order=DEFAULT_MAX_ORDER),
                     vs_named)]
     why = (f"{sel.reason}; and beside it the calibration absorbed a discrepancy with the friction the bench measured "
-           f"(held-out RMSE {gap.rmse_null:.2f} N*m with {first} on the bench friction against {gap.rmse_alt:.2f}, "
-           f"t = {gap.t_stat:.1f}); {cid} beside {first} on the bench friction accounts for {_closed_share(gap, vs_named):.0%} "
-           f"of it ({vs_named.rmse_alt:.2f} N*m, t = {vs_named.t_stat:.1f})")
-    return replace(sel, causes=causes, final=pair, reason=why), found
+           f"({check.gap_text()} with {first} on the bench friction, t = {check.gap.t_stat:.1f}); {cid} beside {first} "
+           f"on the bench friction accounts for {_closed_share(check.gap, vs_named):.0%} of it "
+           f"({vs_named.rmse_alt:.2f} N*m, t = {vs_named.t_stat:.1f})")
+    return replace(sel, causes=causes, final=pair, reason=why), check.found
