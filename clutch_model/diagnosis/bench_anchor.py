@@ -8,7 +8,9 @@ and the held-out rows cannot tell them apart:
 - friction_degradation on one drive: the pack heats as the energy is dissipated, so friction
   that falls with the energy reads as friction that falls with the temperature (mu_C's
   temperature slope). The two part only when the pack cools again (a later drive).
-- drag_torque: a torque proportional to the slip speed reads as the viscous slope k_V.
+- drag_torque, expected but not measured: a torque proportional to the slip speed reads as
+  the viscous slope k_V (on the quick car's drag campaign the calibration did not absorb it:
+  the bench model was 27 % above the calibrated mean square).
 
 The bench measured those coefficients on the material itself (the temperature slope over the
 bench's sump temperatures, the slip sweep), so it can tell them apart. When the selection names
@@ -22,8 +24,9 @@ bench fit's own small misfit on the car, so the mechanism may stay a little shor
 one such mechanism it is named (the extended model keeps the bench's friction); with two that
 the held-out rows do not tell apart the answer is ``unexplained``.
 
-On a campaign with nothing hidden the bench-fitted friction predicts the car runs as well as the
-calibrated one, within a few % of the mean square, so the check does not run.
+On a campaign with nothing hidden the bench-fitted friction predicts the car runs about as well as
+the calibrated one (its held-out mean square at most 24 % above over 26 such campaigns), so no
+mechanism is tried.
 """
 from __future__ import annotations
 
@@ -111,14 +114,17 @@ class _Check:
         return (cid, fitted, vs_bench), None
 
 
-def none_or_bench_anchored(data, sel, ctx, bench_model, candidate_ids, alpha: float, min_gain_frac: float,
+def none_or_bench_anchored(data, sel, ctx, candidate_ids, alpha: float, min_gain_frac: float,
                            say=lambda msg: None):
     """A selection that named nothing, checked for a cause the calibration absorbed (module doc)
-    -> (selection, what the check found: a dict for the report, or None when it did not run)."""
+    -> (selection, what the check found: a dict for the report, or None when it did not run: a
+    verdict other than ``none``, or no bench friction apart from the calibrated one,
+    ``ctx.bench_model``)."""
     from clutch_model.diagnosis.candidates import ModelFit, fit_alone
     from clutch_model.diagnosis.selection import Cause, Selection, parameter_ci95, residual
     from clutch_model.diagnosis.structure_test import DEFAULT_MAX_ORDER
 
+    bench_model = ctx.bench_model
     if sel.verdict != "none" or bench_model is None:
         return sel, None
     train = np.asarray(data.train_mask, bool)
@@ -154,7 +160,7 @@ def none_or_bench_anchored(data, sel, ctx, bench_model, candidate_ids, alpha: fl
     return named, check.found
 
 
-def named_and_bench_anchored(data, sel, ctx, bench_model, candidate_ids, alpha: float, min_gain_frac: float,
+def named_and_bench_anchored(data, sel, ctx, candidate_ids, alpha: float, min_gain_frac: float,
                              say=lambda msg: None):
     """One named cause, checked for a second one the calibration absorbed beside it: the named
     cause refitted on the bench friction against the final model, and each other mechanism
@@ -167,6 +173,7 @@ def named_and_bench_anchored(data, sel, ctx, bench_model, candidate_ids, alpha: 
     from clutch_model.diagnosis.selection import Cause, parameter_ci95, residual
     from clutch_model.diagnosis.structure_test import DEFAULT_MAX_ORDER
 
+    bench_model = ctx.bench_model
     if sel.verdict != "named" or len(sel.causes) != 1 or bench_model is None:
         return sel, None
     first = sel.causes[0].id

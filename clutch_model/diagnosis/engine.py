@@ -515,11 +515,9 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
     sel, force_dynamics = named_or_force_dynamics(data, sel, campaign, sigma_guess, ALPHA, NAMED_GAIN_FRAC, say)
     timings["force dynamics"] = time.perf_counter() - t0
     # one cause named: a second one the car calibration absorbed beside it (bench_anchor.py)
-    bench_anchor = None
-    if cal_base is not bench_model:
-        t0 = time.perf_counter()
-        sel, bench_anchor = named_and_bench_anchored(data, sel, ctx, bench_model, ids, ALPHA, NAMED_GAIN_FRAC, say)
-        timings["bench anchor"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    sel, bench_anchor = named_and_bench_anchored(data, sel, ctx, ids, ALPHA, NAMED_GAIN_FRAC, say)
+    timings["bench anchor"] = time.perf_counter() - t0
 
     first = sel.steps[0].scores if sel.steps else []
     fits = []
@@ -571,10 +569,11 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
         timings["force dynamics"] += time.perf_counter() - t0
 
     # still nothing: a cause the car calibration absorbed, seen against the bench (bench_anchor.py)
-    if sel.verdict == "none" and not (discovery is not None and discovery.accepted) and cal_base is not bench_model:
+    if not (discovery is not None and discovery.accepted):
         t0 = time.perf_counter()
-        sel, bench_anchor = none_or_bench_anchored(data, sel, ctx, bench_model, ids, ALPHA, NAMED_GAIN_FRAC, say)
-        timings["bench anchor"] = time.perf_counter() - t0
+        sel, anchored = none_or_bench_anchored(data, sel, ctx, ids, ALPHA, NAMED_GAIN_FRAC, say)
+        bench_anchor = anchored or bench_anchor
+        timings["bench anchor"] += time.perf_counter() - t0
 
     # -- stage 4: extend ------------------------------------------------------------------------
     cause = {"named": None, "none": "none", "unexplained": "unexplained"}[sel.verdict]
