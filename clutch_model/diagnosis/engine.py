@@ -40,6 +40,7 @@ from clutch_model.diagnosis.lockup import without_locked_torque
 from clutch_model.diagnosis.run_level import within_run_forecast
 from clutch_model.diagnosis.force_dynamics import named_or_force_dynamics, none_or_rate_limit
 from clutch_model.diagnosis.bench_anchor import named_and_bench_anchored, none_or_bench_anchored
+from clutch_model.diagnosis.friction_ridge import choose_ridge_factor
 from clutch_model.diagnosis.fitting import CANDIDATE_IDS, CandidateFit, fit_candidate
 from clutch_model.diagnosis.noise_model import fit_noise_model, white_floor
 from clutch_model.diagnosis.selection import (Selection, SelectionData, leaves_of, refit_chain, residual,
@@ -481,8 +482,14 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
     timings["car calibration"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     say("fitting the baseline friction correction")
+    # how strongly the data hold the correction every later fit refits (friction_ridge.py)
+    ridge = choose_ridge_factor(cal_base, campaign, fit_mask, sigma_guess)
+    calibration_info = {**calibration_info, "friction_correction": ridge.to_json()}
+    cv = ", ".join(f"{k} {v:.2f}" for k, v in ridge.to_json()["cv_rmse_nm"].items())
+    say(f"friction correction ridge x{ridge.to_json()['ridge_factor']} "
+        f"(cross-validated RMSE over {ridge.folds} stretches: {cv or 'fewer than two stretches'})")
     calibrated = fit_candidate(cal_base, campaign, fit_mask, None, energy_total, torque_scale,
-                               noise_sigma_nm=sigma_guess)
+                               noise_sigma_nm=sigma_guess, ridge_factor=ridge.factor)
     timings["friction correction"] = time.perf_counter() - t0
     calibrated.held_out_rmse_nm = _rmse(calibrated.residual, eval_mask)
     rmse = {"nominal": _rmse(nominal_resid, eval_mask),
@@ -496,7 +503,8 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
     lib_names, lib = residual_library(campaign, sim_cal, calibrated.predicted)
     ctx = CampaignContext(campaign, energy_total, torque_scale, sigma_guess,
                           bench_model if cal_base is not bench_model else None,
-                          slip_smoothing_s=float(inputs.get("sigma_s", 0.0)))   # 0 unless smoothed
+                          slip_smoothing_s=float(inputs.get("sigma_s", 0.0)),   # 0 unless smoothed
+                          friction_ridge_factor=ridge.factor)
     ids = list(candidates) if candidates else diagnosis_candidate_ids()
     data = SelectionData(y=campaign.torque_measured, t=campaign.t, run_start=campaign.run_start,
                          train_mask=fit_mask & scored, test_mask=eval_mask & scored, features=lib,
@@ -512,7 +520,8 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
     timings["candidates"] = time.perf_counter() - t0
     # a named time mechanism against a force path beyond the catalog (force_dynamics.py)
     t0 = time.perf_counter()
-    sel, force_dynamics = named_or_force_dynamics(data, sel, campaign, sigma_guess, ALPHA, NAMED_GAIN_FRAC, say)
+    sel, force_dynamics = named_or_force_dynamics(data, sel, campaign, sigma_guess, ALPHA, NAMED_GAIN_FRAC, say,
+                                                  ridge_factor=ridge.factor)
     timings["force dynamics"] = time.perf_counter() - t0
     # one cause named: a second one the car calibration absorbed beside it (bench_anchor.py)
     t0 = time.perf_counter()
@@ -564,7 +573,8 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
     # nothing found, in the catalog or beyond: a rate-limited force path (force_dynamics.py)
     if sel.verdict == "none" and not (discovery is not None and discovery.accepted):
         t0 = time.perf_counter()
-        sel, rate_limit = none_or_rate_limit(data, sel, campaign, sigma_guess, ALPHA, NAMED_GAIN_FRAC, say)
+        sel, rate_limit = none_or_rate_limit(data, sel, campaign, sigma_guess, ALPHA, NAMED_GAIN_FRAC, say,
+                                             ridge_factor=ridge.factor)
         force_dynamics = force_dynamics or rate_limit
         timings["force dynamics"] += time.perf_counter() - t0
 

@@ -126,19 +126,23 @@ class CampaignObjective(TorqueLeastSquares):
     (``co_specs``: [(mech_id, [ParamSpec])]), then the friction correction."""
 
     def __init__(self, base: ClutchModel, campaign: Campaign, fit_mask: np.ndarray, mech_id: str | None,
-                 specs, fit_friction: bool = True, noise_sigma_nm: float = 1.0, co_specs=()):
+                 specs, fit_friction: bool = True, noise_sigma_nm: float = 1.0, co_specs=(),
+                 ridge_factor: float = 1.0):
         self.base = base
         self.campaign = campaign
         self.mech_id = mech_id
         self.own_specs = list(specs or [])
         self.co_specs = [(cid, list(cs)) for cid, cs in co_specs]
         self.specs = self.own_specs + [s for _, cs in self.co_specs for s in cs]
-        self.fit_friction = fit_friction
+        # ridge_factor: the campaign's friction-correction ridge (friction_ridge.choose_ridge_factor);
+        # infinite: the data do not support a correction, none is fitted
+        self.fit_friction = bool(fit_friction) and math.isfinite(ridge_factor)
         self.a0 = base.friction_coefficients
         self.n_mech = len(self.specs)
         mask = fit_mask & np.isfinite(campaign.torque_measured)
         n_fit = int(mask.sum())
-        ridge = math.sqrt(max(n_fit, 1)) * noise_sigma_nm / RIDGE_SCALE if fit_friction else 0.0
+        ridge = (ridge_factor * math.sqrt(max(n_fit, 1)) * noise_sigma_nm / RIDGE_SCALE
+                 if self.fit_friction else 0.0)
         self._plant_inputs = PlantInputs.of(campaign)
         super().__init__(self._predict_xs, campaign.torque_measured, mask, ridge=ridge,
                          ridge_index=slice(self.n_mech, None), steps=self._fd_steps)
@@ -226,14 +230,17 @@ def solve_from(obj: CampaignObjective, x0: np.ndarray, max_nfev: int) -> np.ndar
 def fit_candidate(base: ClutchModel, campaign: Campaign, fit_mask: np.ndarray, mech_id: str | None,
                   energy_total_j: float, torque_scale: float, fit_friction: bool = True,
                   max_nfev: int = 40, noise_sigma_nm: float = 1.0, start: dict | None = None,
-                  co_start: dict | None = None) -> CandidateFit:
+                  co_start: dict | None = None, ridge_factor: float = 1.0) -> CandidateFit:
     """Fit one candidate (mech_id=None: the baseline with the friction correction only); the
     mechanisms of ``base`` that ``co_fitted_ids`` names move with it (``co_start``: {mech_id:
-    {parameter: value}} to start them from, else their values in ``base``)."""
+    {parameter: value}} to start them from, else their values in ``base``). ``ridge_factor``
+    multiplies the friction correction's ridge (infinite: no correction is fitted)."""
     specs = search_space(mech_id, campaign, energy_total_j, torque_scale) if mech_id else []
     co_ids = co_fitted_ids(mech_id, base)
     co_specs = [(cid, search_space(cid, campaign, energy_total_j, torque_scale)) for cid in co_ids]
-    obj = CampaignObjective(base, campaign, fit_mask, mech_id, specs, fit_friction, noise_sigma_nm, co_specs)
+    obj = CampaignObjective(base, campaign, fit_mask, mech_id, specs, fit_friction, noise_sigma_nm, co_specs,
+                            ridge_factor)
+    fit_friction = obj.fit_friction
     n_corr = N_CORR if fit_friction else 0
     # the co-fitted parameters start at co_start, else at their values in base
     values0 = {**{m.id: m.values for m in base.mechanisms}, **(co_start or {})}
