@@ -40,8 +40,8 @@ from clutch_model.diagnosis.lockup import without_locked_torque
 from clutch_model.diagnosis.run_level import within_run_forecast
 from clutch_model.diagnosis.force_dynamics import named_or_force_dynamics, none_or_rate_limit
 from clutch_model.diagnosis.bench_anchor import named_and_bench_anchored, none_or_bench_anchored
-from clutch_model.diagnosis.friction_ridge import choose_ridge_factor
 from clutch_model.diagnosis.fitting import CANDIDATE_IDS, CandidateFit, fit_candidate
+from clutch_model.diagnosis.friction_ridge import held_to_the_data
 from clutch_model.diagnosis.noise_model import fit_noise_model, white_floor
 from clutch_model.diagnosis.selection import (Selection, SelectionData, leaves_of, refit_chain, residual,
                                                rival_of_extension, select_causes, timing_widened)
@@ -482,20 +482,23 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
     timings["car calibration"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     say("fitting the baseline friction correction")
-    # how strongly the data hold the correction every later fit refits (friction_ridge.py)
-    ridge = choose_ridge_factor(cal_base, campaign, fit_mask, sigma_guess)
-    calibration_info = {**calibration_info, "friction_correction": ridge.to_json()}
-    cv = ", ".join(f"{k} {v:.2f}" for k, v in ridge.to_json()["cv_rmse_nm"].items())
-    say(f"friction correction ridge x{ridge.to_json()['ridge_factor']} "
-        f"(cross-validated RMSE over {ridge.folds} stretches: {cv or 'fewer than two stretches'})")
     calibrated = fit_candidate(cal_base, campaign, fit_mask, None, energy_total, torque_scale,
-                               noise_sigma_nm=sigma_guess, ridge_factor=ridge.factor)
-    timings["friction correction"] = time.perf_counter() - t0
+                               noise_sigma_nm=sigma_guess)
     calibrated.held_out_rmse_nm = _rmse(calibrated.residual, eval_mask)
+    # the calibrated model as written: its correction held to what the data support
+    # (friction_ridge.py); the selection compares every candidate with ``calibrated``, whose
+    # correction is refitted as each candidate's is
+    written, ridge = held_to_the_data(calibrated, campaign, fit_mask, energy_total, torque_scale, sigma_guess)
+    written.held_out_rmse_nm = _rmse(written.residual, eval_mask)
+    calibration_info = {**calibration_info, "friction_correction": {}}
+    if ridge is not None:
+        calibration_info["friction_correction"]["calibrated"] = ridge.to_json()
+        say(_ridge_line("calibrated", ridge))
+    timings["friction correction"] = time.perf_counter() - t0
     rmse = {"nominal": _rmse(nominal_resid, eval_mask),
             "bench": _rmse(campaign.torque_measured - bench_pred, eval_mask),
-            "calibrated": calibrated.held_out_rmse_nm}
-    emit("calibrated", model=calibrated.model, rmse=dict(rmse), split=split, info=calibration_info)
+            "calibrated": written.held_out_rmse_nm}
+    emit("calibrated", model=written.model, rmse=dict(rmse), split=split, info=calibration_info)
 
     # -- stage 3: candidates and verdict (forward selection with held-out tests) -------------
     t0 = time.perf_counter()
@@ -503,8 +506,7 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
     lib_names, lib = residual_library(campaign, sim_cal, calibrated.predicted)
     ctx = CampaignContext(campaign, energy_total, torque_scale, sigma_guess,
                           bench_model if cal_base is not bench_model else None,
-                          slip_smoothing_s=float(inputs.get("sigma_s", 0.0)),   # 0 unless smoothed
-                          friction_ridge_factor=ridge.factor)
+                          slip_smoothing_s=float(inputs.get("sigma_s", 0.0)))   # 0 unless smoothed
     ids = list(candidates) if candidates else diagnosis_candidate_ids()
     data = SelectionData(y=campaign.torque_measured, t=campaign.t, run_start=campaign.run_start,
                          train_mask=fit_mask & scored, test_mask=eval_mask & scored, features=lib,
@@ -520,8 +522,7 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
     timings["candidates"] = time.perf_counter() - t0
     # a named time mechanism against a force path beyond the catalog (force_dynamics.py)
     t0 = time.perf_counter()
-    sel, force_dynamics = named_or_force_dynamics(data, sel, campaign, sigma_guess, ALPHA, NAMED_GAIN_FRAC, say,
-                                                  ridge_factor=ridge.factor)
+    sel, force_dynamics = named_or_force_dynamics(data, sel, campaign, sigma_guess, ALPHA, NAMED_GAIN_FRAC, say)
     timings["force dynamics"] = time.perf_counter() - t0
     # one cause named: a second one the car calibration absorbed beside it (bench_anchor.py)
     t0 = time.perf_counter()
@@ -573,8 +574,7 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
     # nothing found, in the catalog or beyond: a rate-limited force path (force_dynamics.py)
     if sel.verdict == "none" and not (discovery is not None and discovery.accepted):
         t0 = time.perf_counter()
-        sel, rate_limit = none_or_rate_limit(data, sel, campaign, sigma_guess, ALPHA, NAMED_GAIN_FRAC, say,
-                                             ridge_factor=ridge.factor)
+        sel, rate_limit = none_or_rate_limit(data, sel, campaign, sigma_guess, ALPHA, NAMED_GAIN_FRAC, say)
         force_dynamics = force_dynamics or rate_limit
         timings["force dynamics"] += time.perf_counter() - t0
 
@@ -588,7 +588,7 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
     # -- stage 4: extend ------------------------------------------------------------------------
     cause = {"named": None, "none": "none", "unexplained": "unexplained"}[sel.verdict]
     extended_fit = None
-    extended_model = calibrated.model
+    extended_model = written.model
     cause_params, cause_ci, causes = {}, {}, []
     if discovery is not None and discovery.accepted:
         cause = "discovered"
@@ -614,7 +614,11 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
         cause_ci = dict(causes[0]["parameters_ci95"])
     elif sel.verdict == "named":
         cause = sel.causes[0].id
-        extended_fit = sel.final.fit
+        extended_fit, ext_ridge = held_to_the_data(sel.final.fit, campaign, fit_mask, energy_total, torque_scale,
+                                                   sigma_guess)
+        if ext_ridge is not None:
+            calibration_info["friction_correction"]["extended"] = ext_ridge.to_json()
+            say(_ridge_line("extended", ext_ridge))
         extended_model = extended_fit.model
         causes = cause_entries(sel.causes, extended_model, 0.5 * ctx.row_interval_s)
         cause_params = dict(causes[0]["parameters"])
@@ -629,7 +633,7 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
                         "closest_leaves": {k: v for k, v in sel.closest_leaves.items() if k != "structure_follows"}}
         if discovery is not None:
             cause_params["discovery_tried"] = discovery.tried()
-    final_resid = extended_fit.residual if extended_fit else calibrated.residual
+    final_resid = extended_fit.residual if extended_fit else written.residual
     nm = fit_noise_model(np.where(fit_mask & scored, final_resid, np.nan), campaign.run_start)
     noise = {"ar_order": nm.order, "innovation_sigma_nm": nm.innovation_sigma,
              "sigma_nm": math.sqrt(nm.variance),
@@ -639,8 +643,8 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
     d = Diagnosis(cause_id=cause, reason=sel.reason, evidence=evidence, cause_parameters=cause_params,
                   sigma_nm=noise["sigma_nm"], rmse=rmse, held_out=split.labels, fit_runs=fit_runs,
                   candidates=fits, scores=first, features_r2=r2, nominal_model=nominal, bench_model=bench_model,
-                  calibrated_model=calibrated.model, extended_model=extended_model, campaign=campaign,
-                  calibrated_fit=calibrated, calibrated_sim=sim_cal, extended_fit=extended_fit,
+                  calibrated_model=written.model, extended_model=extended_model, campaign=campaign,
+                  calibrated_fit=written, calibrated_sim=sim_cal, extended_fit=extended_fit,
                   nominal_pred=nominal_pred, causes=causes, cause_ci95=cause_ci, selection=sel,
                   split=split, fit_mask=fit_mask, eval_mask=eval_mask, locked_rows=int(locked.sum()),
                   noise=noise, bench_info=bench_info or {}, calibration_info=calibration_info, timings=timings,
@@ -1084,6 +1088,14 @@ def _beside_discovered(discovery: DiscoveryOutcome, discovered: dict, model: Clu
     by_id = {c["id"]: c for c in cause_entries(discovery.beside, model, half_row_s)}
     by_id["discovered"] = discovered
     return [by_id[i] for i in discovery.order if i in by_id]
+
+
+def _ridge_line(which: str, ridge) -> str:
+    """One progress line on the friction correction's ridge of the model written as ``which``."""
+    j = ridge.to_json()
+    cv = ", ".join(f"x{k} {v:.2f}" for k, v in j["cv_rmse_nm"].items()) or "fewer than two stretches"
+    return (f"{which} model's friction correction: ridge x{j['ridge_factor']} (cross-validated RMSE "
+            f"over {ridge.folds} fitted stretches: {cv} N*m)")
 
 
 def _record_energy_history(model: ClutchModel, campaign: Campaign) -> None:

@@ -95,10 +95,8 @@ class ForcePathObjective(CampaignObjective):
     """x = the force path's parameters (in their search transform) followed by the friction
     correction; the base model's force goes through the path (``path_force``) before the plant."""
 
-    def __init__(self, base: ClutchModel, campaign, fit_mask, specs, noise_sigma_nm: float = 1.0,
-                 ridge_factor: float = 1.0):
-        super().__init__(base, campaign, fit_mask, None, specs, fit_friction=True, noise_sigma_nm=noise_sigma_nm,
-                         ridge_factor=ridge_factor)
+    def __init__(self, base: ClutchModel, campaign, fit_mask, specs, noise_sigma_nm: float = 1.0):
+        super().__init__(base, campaign, fit_mask, None, specs, fit_friction=True, noise_sigma_nm=noise_sigma_nm)
 
     def path_force(self, values) -> np.ndarray:
         """The force on the plant's rows through the path with parameter ``values`` (model units)."""
@@ -123,10 +121,8 @@ class ForcePathObjective(CampaignObjective):
 class SecondOrderObjective(ForcePathObjective):
     """The second-order force path: x = [log f_n, log damping] then the friction correction."""
 
-    def __init__(self, base: ClutchModel, campaign, fit_mask, delay_s: float, noise_sigma_nm: float = 1.0,
-                 ridge_factor: float = 1.0):
-        super().__init__(base, campaign, fit_mask, _specs(delay_s), noise_sigma_nm=noise_sigma_nm,
-                         ridge_factor=ridge_factor)
+    def __init__(self, base: ClutchModel, campaign, fit_mask, delay_s: float, noise_sigma_nm: float = 1.0):
+        super().__init__(base, campaign, fit_mask, _specs(delay_s), noise_sigma_nm=noise_sigma_nm)
 
     def path_force(self, values) -> np.ndarray:
         pi = self._plant_inputs
@@ -154,11 +150,11 @@ class ForcePathFit:
 
 
 def fit_second_order(base: ClutchModel, campaign, fit_mask, delay_s: float, noise_sigma_nm: float = 1.0,
-                     max_nfev: int = 40, ridge_factor: float = 1.0) -> ForcePathFit:
+                     max_nfev: int = 40) -> ForcePathFit:
     """The second-order force path on ``base`` (its time mechanisms already taken out), jointly
     with the friction correction, on the training rows ``fit_mask``. Started from the best of
     START_DAMPINGS at the group delay ``delay_s`` of the mechanism it stands in for."""
-    obj = SecondOrderObjective(base, campaign, fit_mask, delay_s, noise_sigma_nm, ridge_factor)
+    obj = SecondOrderObjective(base, campaign, fit_mask, delay_s, noise_sigma_nm)
     starts = [[math.log(_start_f_n_hz(zeta, delay_s)), math.log(zeta)] for zeta in START_DAMPINGS]
     return _fit_from_best_start(obj, starts, max_nfev, "second_order_force_path")
 
@@ -166,7 +162,7 @@ def fit_second_order(base: ClutchModel, campaign, fit_mask, delay_s: float, nois
 def _fit_from_best_start(obj: ForcePathObjective, starts, max_nfev: int, fit_id: str) -> ForcePathFit:
     """Least squares of ``obj`` from the best (on the training rows) of the path ``starts``
     (search-transformed values; friction correction 0) -> the fitted force path."""
-    xs = np.vstack([np.concatenate([np.asarray(x0, float), np.zeros(N_CORR if obj.fit_friction else 0)]) for x0 in starts])
+    xs = np.vstack([np.concatenate([np.asarray(x0, float), np.zeros(N_CORR)]) for x0 in starts])
     sse = np.nansum(obj.data_residuals(obj.predict(xs)) ** 2, axis=1)
     x = solve_from(obj, xs[int(np.argmin(sse))], max_nfev)
     params = {s.name: s.from_x(x[j]) for j, s in enumerate(obj.specs)}
@@ -195,7 +191,7 @@ def _named_refitted(sel, base: ClutchModel, stand_in: list, train):
 
 
 def named_or_force_dynamics(data, sel, campaign, sigma_nm: float, alpha: float, min_gain_frac: float,
-                            say=lambda msg: None, ridge_factor: float = 1.0):
+                            say=lambda msg: None):
     """A selection that named a time mechanism, checked against the second-order force path
     (module docstring) -> (selection, what the check found: a dict for the report, or None
     when there was nothing to check). The rival takes the named time mechanisms' place on the
@@ -217,7 +213,7 @@ def named_or_force_dynamics(data, sel, campaign, sigma_nm: float, alpha: float, 
     base = model.with_mechanisms([m for m in model.mechanisms if m.id not in timed])
     say(f"{', '.join(timed)} named: checking a second-order force path beyond the catalog in its place")
     fit = fit_second_order(base, campaign, np.asarray(data.train_mask, bool), group_delay_s(stand_in),
-                           noise_sigma_nm=sigma_nm, ridge_factor=ridge_factor)
+                           noise_sigma_nm=sigma_nm)
     r_named = residual(data, sel.final)
     r_rival = residual(data, fit)
     head = _compare(data, r_named, r_rival, DEFAULT_MAX_ORDER)
@@ -281,11 +277,10 @@ def rate_limited_force(t, force, run_start, rate_n_per_s):
 class RateLimitObjective(ForcePathObjective):
     """The slew-rate-limited force path: x = [log rate] then the friction correction."""
 
-    def __init__(self, base: ClutchModel, campaign, fit_mask, noise_sigma_nm: float = 1.0,
-                 ridge_factor: float = 1.0):
+    def __init__(self, base: ClutchModel, campaign, fit_mask, noise_sigma_nm: float = 1.0):
         specs = [ParamSpec("rate_n_per_s", True, RATE_BOUNDS_N_PER_S[0], RATE_BOUNDS_N_PER_S[1],
                            np.array([START_RATES_N_PER_S[1]]))]
-        super().__init__(base, campaign, fit_mask, specs, noise_sigma_nm=noise_sigma_nm, ridge_factor=ridge_factor)
+        super().__init__(base, campaign, fit_mask, specs, noise_sigma_nm=noise_sigma_nm)
 
     def path_force(self, values) -> np.ndarray:
         pi = self._plant_inputs
@@ -293,16 +288,16 @@ class RateLimitObjective(ForcePathObjective):
 
 
 def fit_rate_limit(base: ClutchModel, campaign, fit_mask, noise_sigma_nm: float = 1.0,
-                   max_nfev: int = 40, ridge_factor: float = 1.0) -> ForcePathFit:
+                   max_nfev: int = 40) -> ForcePathFit:
     """The slew-rate-limited force path on ``base``, jointly with the friction correction, on
     the training rows ``fit_mask``; started from the best of START_RATES_N_PER_S."""
-    obj = RateLimitObjective(base, campaign, fit_mask, noise_sigma_nm, ridge_factor)
+    obj = RateLimitObjective(base, campaign, fit_mask, noise_sigma_nm)
     return _fit_from_best_start(obj, [[math.log(r)] for r in START_RATES_N_PER_S], max_nfev,
                                 "rate_limited_force_path")
 
 
 def none_or_rate_limit(data, sel, campaign, sigma_nm: float, alpha: float, min_gain_frac: float,
-                       say=lambda msg: None, ridge_factor: float = 1.0):
+                       say=lambda msg: None):
     """A selection that named nothing, checked against a slew-rate-limited force path -> (selection,
     what the check found: a dict for the report, or None when there was nothing to check).
 
@@ -328,7 +323,7 @@ def none_or_rate_limit(data, sel, campaign, sigma_nm: float, alpha: float, min_g
     say("nothing named: checking a slew-rate-limited force path beyond the catalog")
     train = np.asarray(data.train_mask, bool)
     model = sel.final.fit.model
-    fit = fit_rate_limit(model, campaign, train, noise_sigma_nm=sigma_nm, ridge_factor=ridge_factor)
+    fit = fit_rate_limit(model, campaign, train, noise_sigma_nm=sigma_nm)
     r_fit = residual(data, fit)
     head = _compare(data, residual(data, sel.final), r_fit, DEFAULT_MAX_ORDER)
     rate = float(fit.parameters["rate_n_per_s"])

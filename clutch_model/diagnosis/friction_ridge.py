@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from clutch_model.diagnosis.fitting import N_CORR, CampaignObjective
+from clutch_model.diagnosis.fitting import N_CORR, CampaignObjective, apply_friction_correction, fit_candidate
 
 FACTORS = (1.0, 10.0, 100.0, math.inf)   # multiples of the correction's ridge (fitting.RIDGE_SCALE)
 RELATIVE_TIE = 1e-3                      # cross-validated mean squares this close: the stronger ridge
@@ -101,3 +101,32 @@ def choose_ridge_factor(base, campaign, fit_mask, noise_sigma_nm: float) -> Ridg
     best = min(cv.values())
     factor = max(f for f, v in cv.items() if v * v <= best * best * (1 + RELATIVE_TIE))
     return RidgeChoice(factor, n_folds, cv)
+
+
+def without_correction(fit):
+    """The model of a fit (fitting.CandidateFit) with its friction correction taken out (the
+    correction is additive in a0..a19), or None when it has none."""
+    if not getattr(fit, "joint", False) or getattr(fit, "friction_correction", None) is None:
+        return None
+    delta = np.asarray(fit.friction_correction, float)
+    a = np.asarray(fit.model.friction_coefficients, float)
+    return fit.model.with_friction(a=a - apply_friction_correction(np.zeros_like(a), delta))
+
+
+def held_to_the_data(fit, campaign, fit_mask, energy_total_j: float, torque_scale: float,
+                     noise_sigma_nm: float):
+    """A fit to be written (the calibrated model, the extended one) with its friction correction
+    refitted at the ridge the data support (choose_ridge_factor on the fit's model without the
+    correction; its mechanisms as fitted) -> (fit, RidgeChoice or None when it has no
+    correction). At factor 1 the fit is returned as it is."""
+    base = without_correction(fit)
+    if base is None:
+        return fit, None
+    choice = choose_ridge_factor(base, campaign, fit_mask, noise_sigma_nm)
+    if choice.factor == 1.0:
+        return fit, choice
+    refit = fit_candidate(base, campaign, fit_mask, None, energy_total_j, torque_scale,
+                          noise_sigma_nm=noise_sigma_nm, ridge_factor=choice.factor)
+    refit.id, refit.parameters, refit.co_parameters = fit.id, dict(fit.parameters), dict(fit.co_parameters)
+    return refit, choice
+

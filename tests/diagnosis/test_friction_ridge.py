@@ -18,7 +18,7 @@ import pytest
 
 from clutch_model.diagnosis.engine import smooth_sump
 from clutch_model.diagnosis.fitting import apply_friction_correction, fit_candidate
-from clutch_model.diagnosis.friction_ridge import choose_ridge_factor, fold_index
+from clutch_model.diagnosis.friction_ridge import choose_ridge_factor, fold_index, held_to_the_data
 from clutch_model.discovery.synthetic import _campaign_from
 from clutch_model.formats.bag_reader import Campaign, read_bags
 from clutch_model.plant.params import load_model
@@ -102,8 +102,13 @@ def test_no_correction_is_fitted_to_coloured_noise_on_the_true_friction(inputs):
     # the weakest ridge follows the noise: it predicts the other stretches worse than none
     assert choice.cv_rmse_nm[1.0] > choice.cv_rmse_nm[math.inf], choice
     assert choice.factor > 1.0, choice
-    fit = fit_candidate(model, noisy, rows, None, 0.0, 1.0, noise_sigma_nm=SIGMA_NM, ridge_factor=choice.factor)
     weak = fit_candidate(model, noisy, rows, None, 0.0, 1.0, noise_sigma_nm=SIGMA_NM, ridge_factor=1.0)
+    # the model as written: the weak fit's correction taken out (exactly: the base's friction
+    # again) and refitted at the chosen ridge
+    fit, again = held_to_the_data(weak, noisy, rows, 0.0, 1.0, SIGMA_NM)
+    assert again.factor == choice.factor
+    direct = fit_candidate(model, noisy, rows, None, 0.0, 1.0, noise_sigma_nm=SIGMA_NM, ridge_factor=choice.factor)
+    assert np.allclose(fit.model.friction_coefficients, direct.model.friction_coefficients, rtol=1e-6, atol=1e-9)
     held = ~rows
     err = lambda f: float(np.sqrt(np.mean((f.predicted - clean)[held] ** 2)))
     assert err(fit) < err(weak), (err(fit), err(weak))
@@ -118,7 +123,7 @@ def test_the_car_calibration_is_not_bent_to_coloured_noise(tmp_path):
     camp = make_hidden_campaign("none", "car", 7, tmp_path / "campaign", magnitudes={}, quick=True)
     res = check_campaign(camp, tmp_path, mc_samples=40, stamps=False)
     assert res.verdict == "none", res.named_label
-    info = res.report["calibration"]["friction_correction"]
+    info = res.report["calibration"]["friction_correction"]["calibrated"]
     assert info["ridge_factor"] in ("100", "inf"), info
     assert info["cv_rmse_nm"]["1"] > info["cv_rmse_nm"][info["ridge_factor"]], info
     runs = read_bags(camp.seen_bags + camp.unseen_bags)
