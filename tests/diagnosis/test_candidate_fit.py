@@ -8,33 +8,20 @@ to leave unmoved (its first trust radius is |x0|).
 """
 from __future__ import annotations
 
-from dataclasses import replace
 
 import numpy as np
 import pytest
 
-from clutch_model.diagnosis.engine import smooth_sump
 from clutch_model.diagnosis.fitting import co_fitted_ids, fit_candidate, search_space, start_shift
-from clutch_model.discovery.synthetic import _campaign_from
-from clutch_model.formats.bag_reader import Campaign
 from clutch_model.plant.mechanisms import make_mechanism
-from clutch_model.plant.params import load_model
 from clutch_model.prediction import predict_campaign
-from clutch_model.virtual_car.campaign import CampaignSpec, synthesize_campaign
+
+from .noise_free_campaigns import reference_campaign, with_measured_torque
 
 
 @pytest.fixture(scope="module")
 def inputs():
-    spec = CampaignSpec(seed=5, n_runs=3, run_duration_s=4.0, rate_hz=100.0, friction_spread=0.0)
-    model = load_model(None)
-    result = synthesize_campaign(spec, base_model=model)
-    campaign, _ = _campaign_from(result, 0.0, np.random.default_rng(0))
-    return model, smooth_sump(campaign)
-
-
-def _measured(campaign, torque):
-    """The campaign with ``torque`` (whole-campaign rows) as its measured torque."""
-    return Campaign([replace(r, torque_measured_nm=torque[sl].copy()) for r, sl in campaign.slices()])
+    return reference_campaign(seed=5, n_runs=3, run_duration_s=4.0)
 
 
 @pytest.mark.parametrize("mech_id, name, true_value", [("torque_offset", "offset_nm", 15.3),
@@ -43,7 +30,7 @@ def _measured(campaign, torque):
 def test_a_parameter_starting_at_zero_reaches_the_truth(inputs, mech_id, name, true_value):
     model, campaign = inputs
     truth = model.with_mechanisms([make_mechanism(mech_id, **{name: true_value})])
-    campaign = _measured(campaign, predict_campaign(truth, campaign, energy0_j=0.0).torque_nm)
+    campaign = with_measured_torque(campaign, predict_campaign(truth, campaign, energy0_j=0.0).torque_nm)
     scale = float(np.nanpercentile(np.abs(campaign.torque_measured), 95))
     spec = search_space(mech_id, campaign, 1e6, scale)[0]
     grid = np.array(spec.grid)
@@ -77,7 +64,7 @@ def test_a_time_mechanism_on_top_of_another_moves_it_back():
     model, campaign = _inputs_fine()
     truth = model.with_mechanisms([make_mechanism("actuator_lag", tau_s=0.08),
                                    make_mechanism("transport_delay", delay_s=0.04)])
-    campaign = _measured(campaign, predict_campaign(truth, campaign, energy0_j=0.0).torque_nm)
+    campaign = with_measured_torque(campaign, predict_campaign(truth, campaign, energy0_j=0.0).torque_nm)
     scale = float(np.nanpercentile(np.abs(campaign.torque_measured), 95))
     mask = np.ones(campaign.t.size, bool)
     lag_alone = fit_candidate(model, campaign, mask, "actuator_lag", 1e6, scale, fit_friction=False)
@@ -100,7 +87,4 @@ def test_a_time_mechanism_on_top_of_another_moves_it_back():
 
 def _inputs_fine():
     """Step force profiles at 200 Hz (a lag and a delay of tens of ms told apart)."""
-    spec = CampaignSpec(seed=7, n_runs=3, run_duration_s=4.0, rate_hz=200.0, friction_spread=0.0)
-    model = load_model(None)
-    campaign, _ = _campaign_from(synthesize_campaign(spec, base_model=model), 0.0, np.random.default_rng(0))
-    return model, smooth_sump(campaign)
+    return reference_campaign(seed=7, n_runs=3, run_duration_s=4.0, rate_hz=200.0)

@@ -11,36 +11,26 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import replace
 
 import numpy as np
 import pytest
 
-from clutch_model.diagnosis.engine import smooth_sump
 from clutch_model.diagnosis.fitting import apply_friction_correction, fit_candidate
 from clutch_model.diagnosis.friction_ridge import choose_ridge_factor, fold_index, held_to_the_data
-from clutch_model.discovery.synthetic import _campaign_from
-from clutch_model.formats.bag_reader import Campaign, read_bags
+from clutch_model.formats.bag_reader import read_bags
 from clutch_model.plant.params import load_model
 from clutch_model.prediction import predict_campaign
-from clutch_model.virtual_car.campaign import CampaignSpec, synthesize_campaign
 from clutch_model.virtual_car.car_logs import measurement_tail_s, score_against_truth
 from clutch_model.virtual_car.hidden_campaigns import check_campaign, make_hidden_campaign
+
+from .noise_free_campaigns import reference_campaign, with_measured_torque
 
 SIGMA_NM = 8.0
 
 
 @pytest.fixture(scope="module")
 def inputs():
-    spec = CampaignSpec(seed=11, n_runs=4, run_duration_s=6.0, rate_hz=100.0, friction_spread=0.0)
-    model = load_model(None)
-    result = synthesize_campaign(spec, base_model=model)
-    campaign, _ = _campaign_from(result, 0.0, np.random.default_rng(0))
-    return model, smooth_sump(campaign)
-
-
-def _measured(campaign, torque):
-    return Campaign([replace(r, torque_measured_nm=torque[sl].copy()) for r, sl in campaign.slices()])
+    return reference_campaign(seed=11, n_runs=4, run_duration_s=6.0)
 
 
 def _ar1(n_per_run, phi, rng):
@@ -77,7 +67,7 @@ def test_a_friction_error_the_basis_holds_is_kept_and_recovered(inputs):
     true_delta = np.array([0.006, 0.002, 0.0, -0.004, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0])
     truth = model.with_friction(a=apply_friction_correction(model.friction_coefficients, true_delta))
     clean = predict_campaign(truth, campaign, energy0_j=0.0).torque_nm
-    noisy = _measured(campaign, clean + np.random.default_rng(1).normal(0.0, SIGMA_NM, clean.size))
+    noisy = with_measured_torque(campaign, clean + np.random.default_rng(1).normal(0.0, SIGMA_NM, clean.size))
     rows = _fit_rows(noisy)
     choice = choose_ridge_factor(model, noisy, rows, SIGMA_NM)
     assert choice.folds == 8
@@ -96,7 +86,7 @@ def test_no_correction_is_fitted_to_coloured_noise_on_the_true_friction(inputs):
     model, campaign = inputs
     clean = predict_campaign(model, campaign, energy0_j=0.0).torque_nm
     n_per_run = [sl.stop - sl.start for _, sl in campaign.slices()]
-    noisy = _measured(campaign, clean + _ar1(n_per_run, 0.95, np.random.default_rng(2)))
+    noisy = with_measured_torque(campaign, clean + _ar1(n_per_run, 0.95, np.random.default_rng(2)))
     rows = _fit_rows(noisy)
     choice = choose_ridge_factor(model, noisy, rows, SIGMA_NM)
     # the weakest ridge follows the noise: it predicts the other stretches worse than none
