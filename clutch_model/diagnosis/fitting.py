@@ -134,8 +134,8 @@ class CampaignObjective(TorqueLeastSquares):
         self.own_specs = list(specs or [])
         self.co_specs = [(cid, list(cs)) for cid, cs in co_specs]
         self.specs = self.own_specs + [s for _, cs in self.co_specs for s in cs]
-        # ridge_factor: the campaign's friction-correction ridge (friction_ridge.choose_ridge_factor);
-        # infinite: the data do not support a correction, none is fitted
+        # ridge_factor multiplies the friction correction's ridge (friction_ridge.choose_ridge_factor
+        # for the written models); infinite: no correction is fitted
         self.fit_friction = bool(fit_friction) and math.isfinite(ridge_factor)
         self.a0 = base.friction_coefficients
         self.n_mech = len(self.specs)

@@ -1,9 +1,10 @@
-"""How strongly the campaign's data hold the friction correction: its ridge chosen by
-cross-validation over the fitted stretches.
+"""The friction correction of the models diagnose writes, held to what the data support: its
+ridge chosen by cross-validation over the fitted stretches.
 
-Every fit of diagnose (the baseline and each candidate) refits a 10-term friction correction
-(``fitting``) with a ridge that charges a change of 0.05 in mu one noise-level sum of squares.
-Where the car calibration already matches the friction, that correction only follows the noise,
+Every fit of the selection (the baseline and each candidate) refits a 10-term friction
+correction (``fitting``) with a ridge that charges a change of 0.05 in mu one noise-level sum
+of squares; those fits keep it. Where the car calibration already matches the friction, that
+correction only follows the noise,
 and under coloured noise (AR(1) 0.9 torque and slip noise, three 30 s runs) it follows it a long
 way: on such a campaign with the bench friction true to the car, the calibrated model was
 10.2 N*m off on later runs against 2.1 N*m without the correction (the true torque at the
@@ -14,9 +15,10 @@ slips), so its cross-validation is one batch of simulations: the prediction's Ja
 the correction at zero, then for each ridge factor in FACTORS and each fold (a contiguous
 stretch of fitted rows within a run; the held-out stretches between them cut a long drive),
 the ridged linear fit on the other folds predicting the fold. The factor with the least
-cross-validated mean square is the campaign's, the stronger ridge on a near tie (RELATIVE_TIE);
-an infinite one means no correction is fitted anywhere on the campaign. With fewer than two
-folds the ridge stays as it is.
+cross-validated mean square is kept, the stronger ridge on a near tie (RELATIVE_TIE); an
+infinite one means the written model carries no correction. With fewer than two folds the ridge
+stays as it is. ``held_to_the_data`` applies it to a fit about to be written (the calibrated
+model, the final named one), its mechanisms as fitted.
 """
 from __future__ import annotations
 
@@ -80,8 +82,8 @@ def cross_validated_rmse(jac: np.ndarray, resid0: np.ndarray, folds: np.ndarray,
 
 
 def choose_ridge_factor(base, campaign, fit_mask, noise_sigma_nm: float) -> RidgeChoice:
-    """The friction correction's ridge factor for the campaign (module doc), from the model
-    ``base`` (the car calibration) on the fitted rows ``fit_mask``."""
+    """The friction correction's ridge factor (module doc) for the model ``base`` (without a
+    correction) on the fitted rows ``fit_mask``."""
     obj = CampaignObjective(base, campaign, fit_mask, None, [], True, noise_sigma_nm)
     rows = obj.mask
     folds = fold_index(campaign.run_index, rows)
@@ -93,11 +95,7 @@ def choose_ridge_factor(base, campaign, fit_mask, noise_sigma_nm: float) -> Ridg
     jac = ((preds[1:] - preds[0][None, :]) / STEP).T[rows]
     resid0 = np.asarray(campaign.torque_measured, float)[rows] - preds[0][rows]
     ok = np.isfinite(resid0) & np.all(np.isfinite(jac), axis=1)
-    if not ok.all():
-        jac, resid0, folds_rows = jac[ok], resid0[ok], folds[rows][ok]
-    else:
-        folds_rows = folds[rows]
-    cv = cross_validated_rmse(jac, resid0, folds_rows, obj.ridge)
+    cv = cross_validated_rmse(jac[ok], resid0[ok], folds[rows][ok], obj.ridge)
     best = min(cv.values())
     factor = max(f for f, v in cv.items() if v * v <= best * best * (1 + RELATIVE_TIE))
     return RidgeChoice(factor, n_folds, cv)
