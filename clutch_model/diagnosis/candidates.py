@@ -36,6 +36,7 @@ class CampaignContext:
     sigma_nm: float
     bench_model: object = None     # ClutchModel: a second start at the first step
     slip_smoothing_s: float = 0.0  # sd of the Gaussian the slip driving the plant is smoothed with (input_hold)
+    friction_ridge_factor: float = 1.0   # the friction correction's ridge (friction_ridge.py; inf: none)
 
     def __post_init__(self):
         self._friction_only: dict = {}
@@ -49,7 +50,8 @@ class CampaignContext:
         hit = self._friction_only.get(key)
         if hit is None or hit[0] is not base_model:
             fit = fit_candidate(base_model, self.campaign, mask, None, self.energy_total_j, self.torque_scale,
-                                fit_friction=True, noise_sigma_nm=self.sigma_nm)
+                                fit_friction=True, noise_sigma_nm=self.sigma_nm,
+                                ridge_factor=self.friction_ridge_factor)
             hit = (base_model, np.asarray(fit.predicted, float))
             self._friction_only[key] = hit
         return hit[1]
@@ -259,7 +261,8 @@ class ModelFit:
         co_specs = [(cid, search_space(cid, ctx.campaign, ctx.energy_total_j, ctx.torque_scale)) for cid in co]
         base = self.base_model.with_mechanisms(self.fit.model.mechanisms) if co else self.base_model
         obj = CampaignObjective(base, ctx.campaign, self.mask, self.id, specs, fit_friction=self.fit.joint,
-                                noise_sigma_nm=ctx.sigma_nm, co_specs=co_specs)
+                                noise_sigma_nm=ctx.sigma_nm, co_specs=co_specs,
+                                ridge_factor=ctx.friction_ridge_factor)
         x = np.array([s.to_x(self.fit.parameters[s.name]) for s in specs]
                      + [s.to_x(co[cid][s.name]) for cid, cs in co_specs for s in cs]
                      + (list(self.fit.friction_correction) if self.fit.joint else []), float)
@@ -281,7 +284,8 @@ def fit_alone(ctx: CampaignContext, mech_id: str, base_model, mask, joint: bool 
     """One fit of the mechanism on ``base_model`` (module doc; a time mechanism moves the time
     mechanisms of the model with it, fitting.co_fitted_ids)."""
     return fit_candidate(base_model, ctx.campaign, mask, mech_id, ctx.energy_total_j, ctx.torque_scale,
-                         fit_friction=joint, noise_sigma_nm=ctx.sigma_nm, start=start, co_start=co_start)
+                         fit_friction=joint, noise_sigma_nm=ctx.sigma_nm, start=start, co_start=co_start,
+                         ridge_factor=ctx.friction_ridge_factor)
 
 
 def fit_job(ctx: CampaignContext, mech_id: str, bases: list, mask) -> tuple:

@@ -42,6 +42,7 @@ from clutch_model.diagnosis.force_dynamics import named_or_force_dynamics, none_
 from clutch_model.diagnosis.bench_anchor import named_and_bench_anchored, none_or_bench_anchored
 from clutch_model.diagnosis.fitting import CANDIDATE_IDS, CandidateFit, fit_candidate
 from clutch_model.diagnosis.friction_ridge import held_to_the_data
+from clutch_model.diagnosis.ridged_selection import selection_at_the_data_ridge
 from clutch_model.diagnosis.noise_model import fit_noise_model, white_floor
 from clutch_model.diagnosis.selection import (Selection, SelectionData, leaves_of, refit_chain, residual,
                                                rival_of_extension, select_causes, timing_widened)
@@ -173,6 +174,7 @@ class Diagnosis:
     force_path_check: dict | None = None  # a force path beyond the catalog (force_dynamics.py): second-order
     #                                       against a named time mechanism, rate-limited where nothing is named
     bench_anchor: dict | None = None      # nothing named: a cause the calibration absorbed (bench_anchor.py)
+    ridged_selection: dict | None = None  # the selection at the data's ridge (ridged_selection.py)
 
     @property
     def gain_pct(self) -> float:
@@ -516,9 +518,17 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
     cands = [MechanismCandidate(cid, ctx) for cid in ids]
     if fit_executor is not None:
         fit_executor.register(cands)
-    sel = select_causes(data, base, cands, alpha=ALPHA,
-                        min_gain_frac=NAMED_GAIN_FRAC, structure_min_gain_frac=STRUCTURE_GAIN_FRAC,
-                        plain_gain=True, progress=say)
+    select = lambda d_, b_, c_: select_causes(d_, b_, c_, alpha=ALPHA, min_gain_frac=NAMED_GAIN_FRAC,
+                                              structure_min_gain_frac=STRUCTURE_GAIN_FRAC, plain_gain=True,
+                                              progress=say)
+    sel = select(data, base, cands)
+    # the selection again with every fit's correction at the data's ridge (ridged_selection.py)
+    sel, base_r, cands_r, ctx_r, ridged = selection_at_the_data_ridge(
+        select, data, sel, written, cal_base, ctx, ids, ridge, fit_mask & scored, fit_executor, say)
+    if base_r is not None:
+        base, cands, ctx = base_r, cands_r, ctx_r
+    elif ridged is not None and fit_executor is not None:
+        fit_executor.register(cands)         # the first selection's candidates, for what follows
     timings["candidates"] = time.perf_counter() - t0
     # a named time mechanism against a force path beyond the catalog (force_dynamics.py)
     t0 = time.perf_counter()
@@ -650,7 +660,7 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
                   noise=noise, bench_info=bench_info or {}, calibration_info=calibration_info, timings=timings,
                   discovery=discovery, diagnosis_rate=diagnosis_rate, diagnosis_sample=sample_info,
                   inputs=inputs, force_path_check=force_dynamics,
-                  bench_anchor=bench_anchor)
+                  bench_anchor=bench_anchor, ridged_selection=ridged.to_json() if ridged else None)
     emit("selected", diagnosis=d)
     return d
 

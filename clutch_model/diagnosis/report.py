@@ -95,6 +95,7 @@ def report_dict(d: Diagnosis) -> dict:
                       "run_level": sel.run_level.as_dict() if sel and sel.run_level is not None else None,
                       "force_path_check": d.force_path_check,
                       "bench_anchor": d.bench_anchor,
+                      "ridged_selection": d.ridged_selection,
                       "discovery": ({"accepted": d.discovery.accepted, "reason": d.discovery.selection.reason,
                                      "tried": d.discovery.tried()} if d.discovery is not None else None)},
         "residual_features_r2": d.features_r2,
