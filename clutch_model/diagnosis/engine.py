@@ -524,7 +524,8 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
     sel = select(data, base, cands)
     # the selection again with every fit's correction at the data's ridge (ridged_selection.py)
     sel, base_r, cands_r, ctx_r, ridged = selection_at_the_data_ridge(
-        select, data, sel, written, cal_base, ctx, ids, ridge, fit_mask & scored, fit_executor, say)
+        select, data, sel, written, cal_base, ctx, ids, ridge, fit_mask & scored, ALPHA, STRUCTURE_GAIN_FRAC,
+        fit_executor, say)
     if base_r is not None:
         base, cands, ctx = base_r, cands_r, ctx_r
     elif ridged is not None and fit_executor is not None:
