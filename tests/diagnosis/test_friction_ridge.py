@@ -17,12 +17,10 @@ import pytest
 
 from clutch_model.diagnosis.fitting import apply_friction_correction, fit_candidate
 from clutch_model.diagnosis.friction_ridge import choose_ridge_factor, fold_index, held_to_the_data
-from clutch_model.formats.bag_reader import read_bags
-from clutch_model.plant.params import load_model
 from clutch_model.prediction import predict_campaign
-from clutch_model.virtual_car.car_logs import measurement_tail_s, score_against_truth
 from clutch_model.virtual_car.hidden_campaigns import check_campaign, make_hidden_campaign
 
+from .unseen_scores import unseen_rmse_nm
 from .noise_free_campaigns import reference_campaign, with_measured_torque
 
 SIGMA_NM = 8.0
@@ -116,16 +114,7 @@ def test_the_car_calibration_is_not_bent_to_coloured_noise(tmp_path):
     info = res.report["calibration"]["friction_correction"]["calibrated"]
     assert info["ridge_factor"] in ("100", "inf"), info
     assert info["cv_rmse_nm"]["1"] > info["cv_rmse_nm"][info["ridge_factor"]], info
-    runs = read_bags(camp.seen_bags + camp.unseen_bags)
-    unseen = [p.rsplit("/", 1)[-1] for p in camp.unseen_bags]
-    tail = measurement_tail_s(camp.spec)
-
-    def unseen_rmse(model):
-        sc = score_against_truth(model, runs, camp.truth_dir, tail_s=tail)
-        n = sc["run_samples"]
-        return math.sqrt(sum(sc["runs"][r] ** 2 * n[r] for r in unseen) / sum(n[r] for r in unseen))
-
-    true = unseen_rmse(load_model(tmp_path / "campaign" / "truth.yaml"))
-    calibrated = unseen_rmse(load_model(tmp_path / "diag" / "calibrated_model.yaml"))
+    true = unseen_rmse_nm(camp, tmp_path / "campaign" / "truth.yaml")
+    calibrated = unseen_rmse_nm(camp, tmp_path / "diag" / "calibrated_model.yaml")
     assert calibrated < 2.0 * true, (calibrated, true)
     assert json.loads((tmp_path / "campaign" / "truth.json").read_text())["expected_cause"] == "none"

@@ -2,22 +2,21 @@
 (diagnosis.ridged_selection).
 
 Independent expectations: its answer replaces the first only when it names every cause the
-first named and more, and predicts the held-out rows better than the first's model; on the quick car with coloured noise, a drag torque the weak ridge's
-correction absorbed (the first selection: none) is named, and the extended model is closer to
-the true torque on the run diagnose never saw than the calibrated one.
+first named and more, and predicts the held-out rows better than the first's model; on the
+quick car with coloured noise, a drag torque the weak ridge's correction absorbed (the first
+selection: none) is named, and the extended model is closer to the true torque on the run
+diagnose never saw than the calibrated one.
 """
 from __future__ import annotations
 
-import math
 from types import SimpleNamespace
 
 import pytest
 
 from clutch_model.diagnosis.ridged_selection import names_more
-from clutch_model.formats.bag_reader import read_bags
-from clutch_model.plant.params import load_model
-from clutch_model.virtual_car.car_logs import measurement_tail_s, score_against_truth
 from clutch_model.virtual_car.hidden_campaigns import check_campaign, make_hidden_campaign
+
+from .unseen_scores import unseen_rmse_nm
 
 
 def _sel(verdict, *ids):
@@ -53,16 +52,7 @@ def test_a_drag_the_weak_ridge_absorbed_is_named(tmp_path):
     assert head["innovation_variance_cut"] > 0.01 and head["held_out_rmse"] < 0.99 * head["first_held_out_rmse"], head
     (coeff,) = res.report["causes"][0]["parameters"].values()
     assert coeff == pytest.approx(camp.magnitudes["drag_torque"], rel=0.3)
-    runs = read_bags(camp.seen_bags + camp.unseen_bags)
-    unseen = [p.rsplit("/", 1)[-1] for p in camp.unseen_bags]
-    tail = measurement_tail_s(camp.spec)
-
-    def unseen_rmse(model):
-        sc = score_against_truth(model, runs, camp.truth_dir, tail_s=tail)
-        n = sc["run_samples"]
-        return math.sqrt(sum(sc["runs"][r] ** 2 * n[r] for r in unseen) / sum(n[r] for r in unseen))
-
-    calibrated = unseen_rmse(load_model(tmp_path / "diag" / "calibrated_model.yaml"))
-    extended = unseen_rmse(load_model(tmp_path / "diag" / "extended_model.yaml"))
-    true = unseen_rmse(load_model(tmp_path / "campaign" / "truth.yaml"))
+    calibrated = unseen_rmse_nm(camp, tmp_path / "diag" / "calibrated_model.yaml")
+    extended = unseen_rmse_nm(camp, tmp_path / "diag" / "extended_model.yaml")
+    true = unseen_rmse_nm(camp, tmp_path / "campaign" / "truth.yaml")
     assert extended < 0.6 * calibrated and extended < 2.0 * true, (extended, calibrated, true)
