@@ -34,6 +34,11 @@ RELATIVE_TIE = 1e-3                      # cross-validated mean squares this clo
 STEP = 1e-4                              # the Jacobian's step in the correction (mu)
 
 
+def ridge_label(factor: float) -> str:
+    """A ridge factor as report.json and the progress lines give it ("inf": no correction)."""
+    return "inf" if math.isinf(factor) else f"{factor:g}"
+
+
 @dataclass
 class RidgeChoice:
     """The chosen factor and what decided it."""
@@ -43,9 +48,8 @@ class RidgeChoice:
     cv_rmse_nm: dict = field(default_factory=dict)     # {factor: cross-validated RMSE}
 
     def to_json(self) -> dict:
-        label = lambda f: "inf" if math.isinf(f) else f"{f:g}"
-        return {"ridge_factor": label(self.factor), "folds": self.folds,
-                "cv_rmse_nm": {label(f): v for f, v in self.cv_rmse_nm.items()},
+        return {"ridge_factor": ridge_label(self.factor), "folds": self.folds,
+                "cv_rmse_nm": {ridge_label(f): v for f, v in self.cv_rmse_nm.items()},
                 "fitted": math.isfinite(self.factor)}
 
 

@@ -34,6 +34,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 from clutch_model.diagnosis.candidates import MechanismCandidate, baseline_fit
+from clutch_model.diagnosis.friction_ridge import ridge_label
 from clutch_model.diagnosis.selection import _compare, residual
 from clutch_model.diagnosis.structure_test import DEFAULT_MAX_ORDER
 
@@ -50,7 +51,7 @@ class RidgedSelection:
     against_first: dict | None = None     # the second's final model against the first's, held out
 
     def to_json(self) -> dict:
-        return {"ridge_factor": "inf" if self.ridge_factor == float("inf") else f"{self.ridge_factor:g}",
+        return {"ridge_factor": ridge_label(self.ridge_factor),
                 "first_causes": list(self.first_causes), "second_verdict": self.second_verdict,
                 "second_causes": list(self.second_causes), "against_first": self.against_first,
                 "taken": self.taken}
@@ -79,7 +80,7 @@ def selection_at_the_data_ridge(select, data, first, written, cal_base, ctx, ids
     does not name more or does not predict the held-out rows better (module doc)."""
     if ridge is None or ridge.factor == 1.0:
         return first, None, None, None, None
-    label = "inf" if ridge.factor == float("inf") else f"{ridge.factor:g}"
+    label = ridge_label(ridge.factor)
     say(f"selection again with every friction correction at ridge x{label}")
     ctx_r = replace(ctx, friction_ridge_factor=ridge.factor)
     base_r = baseline_fit(written, cal_base, ctx_r, mask)

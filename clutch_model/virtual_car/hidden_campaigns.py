@@ -405,6 +405,23 @@ class CheckResult:
         return d
 
 
+def unseen_stamps_rmse_nm(camp: HiddenCampaign, model_path, runs=None) -> float:
+    """RMSE (N*m) of the model at ``model_path`` against the true torque of ``camp``'s unseen
+    bags, at the torque stamps (car_logs.score_against_truth; lock phases and the measurement
+    tail left out), pooled over those bags' samples. ``runs``: read_bags of the seen and unseen
+    bags, when already read."""
+    from clutch_model.formats.bag_reader import read_bags
+    from clutch_model.plant.params import load_model
+
+    if runs is None:
+        runs = read_bags(camp.seen_bags + camp.unseen_bags)
+    sc = score_against_truth(load_model(model_path), runs, camp.truth_dir, tail_s=measurement_tail_s(camp.spec))
+    n = sc["run_samples"]
+    use = [r for r in (Path(b).name for b in camp.unseen_bags) if n.get(r, 0) > 0]
+    sq = sum(sc["runs"][r] ** 2 * n[r] for r in use)
+    return math.sqrt(sq / sum(n[r] for r in use)) if use else float("nan")
+
+
 def check_campaign(camp: HiddenCampaign, work_dir=None, mc_samples: int | None = None,
                    timeout_s: float | None = None, stamps: bool = True, plots: bool = False) -> CheckResult:
     """``clutch-sim diagnose`` on the seen bags, then both models replayed on every bag and
@@ -456,17 +473,11 @@ def check_campaign(camp: HiddenCampaign, work_dir=None, mc_samples: int | None =
         res.held_out_gain_pct = _gain(res.replay_rmse_nm["calibrated"], res.replay_rmse_nm["extended"])
     if stamps:
         from clutch_model.formats.bag_reader import read_bags
-        from clutch_model.plant.params import load_model
 
         t0, c0 = time.perf_counter(), time.process_time()
         runs = read_bags(camp.seen_bags + camp.unseen_bags)
         for label, name in (("calibrated", "calibrated_model.yaml"), ("extended", "extended_model.yaml")):
-            sc = score_against_truth(load_model(diag / name), runs, camp.truth_dir,
-                                     tail_s=measurement_tail_s(camp.spec))
-            n = sc["run_samples"]
-            use = [r for r in unseen if n.get(r, 0) > 0]
-            sq = sum(sc["runs"][r] ** 2 * n[r] for r in use)
-            res.stamps_rmse_nm[label] = math.sqrt(sq / sum(n[r] for r in use)) if use else float("nan")
+            res.stamps_rmse_nm[label] = unseen_stamps_rmse_nm(camp, diag / name, runs)
         res.stamps_gain_pct = _gain(res.stamps_rmse_nm["calibrated"], res.stamps_rmse_nm["extended"])
         res.wall_s["stamps"], res.cpu_s["stamps"] = time.perf_counter() - t0, time.process_time() - c0
     return res

@@ -18,9 +18,10 @@ import pytest
 from clutch_model.diagnosis.fitting import apply_friction_correction, fit_candidate
 from clutch_model.diagnosis.friction_ridge import choose_ridge_factor, fold_index, held_to_the_data
 from clutch_model.prediction import predict_campaign
-from clutch_model.virtual_car.hidden_campaigns import check_campaign, make_hidden_campaign
+from clutch_model.formats.bag_reader import read_bags
+from clutch_model.virtual_car.hidden_campaigns import (check_campaign, make_hidden_campaign,
+                                                       unseen_stamps_rmse_nm)
 
-from .unseen_scores import unseen_rmse_nm
 from .noise_free_campaigns import reference_campaign, with_measured_torque
 
 SIGMA_NM = 8.0
@@ -114,7 +115,8 @@ def test_the_car_calibration_is_not_bent_to_coloured_noise(tmp_path):
     info = res.report["calibration"]["friction_correction"]["calibrated"]
     assert info["ridge_factor"] in ("100", "inf"), info
     assert info["cv_rmse_nm"]["1"] > info["cv_rmse_nm"][info["ridge_factor"]], info
-    true = unseen_rmse_nm(camp, tmp_path / "campaign" / "truth.yaml")
-    calibrated = unseen_rmse_nm(camp, tmp_path / "diag" / "calibrated_model.yaml")
+    runs = read_bags(camp.seen_bags + camp.unseen_bags)
+    true = unseen_stamps_rmse_nm(camp, tmp_path / "campaign" / "truth.yaml", runs)
+    calibrated = unseen_stamps_rmse_nm(camp, tmp_path / "diag" / "calibrated_model.yaml", runs)
     assert calibrated < 2.0 * true, (calibrated, true)
     assert json.loads((tmp_path / "campaign" / "truth.json").read_text())["expected_cause"] == "none"

@@ -14,9 +14,9 @@ from types import SimpleNamespace
 import pytest
 
 from clutch_model.diagnosis.ridged_selection import names_more
-from clutch_model.virtual_car.hidden_campaigns import check_campaign, make_hidden_campaign
-
-from .unseen_scores import unseen_rmse_nm
+from clutch_model.formats.bag_reader import read_bags
+from clutch_model.virtual_car.hidden_campaigns import (check_campaign, make_hidden_campaign,
+                                                       unseen_stamps_rmse_nm)
 
 
 def _sel(verdict, *ids):
@@ -52,7 +52,8 @@ def test_a_drag_the_weak_ridge_absorbed_is_named(tmp_path):
     assert head["innovation_variance_cut"] > 0.01 and head["held_out_rmse"] < 0.99 * head["first_held_out_rmse"], head
     (coeff,) = res.report["causes"][0]["parameters"].values()
     assert coeff == pytest.approx(camp.magnitudes["drag_torque"], rel=0.3)
-    calibrated = unseen_rmse_nm(camp, tmp_path / "diag" / "calibrated_model.yaml")
-    extended = unseen_rmse_nm(camp, tmp_path / "diag" / "extended_model.yaml")
-    true = unseen_rmse_nm(camp, tmp_path / "campaign" / "truth.yaml")
+    runs = read_bags(camp.seen_bags + camp.unseen_bags)
+    calibrated = unseen_stamps_rmse_nm(camp, tmp_path / "diag" / "calibrated_model.yaml", runs)
+    extended = unseen_stamps_rmse_nm(camp, tmp_path / "diag" / "extended_model.yaml", runs)
+    true = unseen_stamps_rmse_nm(camp, tmp_path / "campaign" / "truth.yaml", runs)
     assert extended < 0.6 * calibrated and extended < 2.0 * true, (extended, calibrated, true)
