@@ -349,6 +349,38 @@ def compare_residuals(resid_null: np.ndarray, resid_alt: np.ndarray, train_mask:
                                 innovation_mse_alt=mse_a, block_rows=block_rows)
 
 
+@dataclass
+class PlainWorseTest:
+    """Is the alternative's plain held-out squared error larger than the null's? Per block of
+    BLOCK_S, the sum of r_alt^2 - r_null^2; t over blocks (one-sided, B - 1 dof)."""
+
+    t_stat: float
+    p_value: float
+    n_blocks: int
+
+
+def plain_worse_test(resid_null: np.ndarray, resid_alt: np.ndarray, rows: np.ndarray, run_start: np.ndarray,
+                     t: np.ndarray, block_s: float = BLOCK_S) -> PlainWorseTest:
+    """One-sided block t-test that ``resid_alt`` has the larger plain squared error on ``rows``
+    (residuals in the torque's own units, no noise model): the plain counterpart of
+    compare_residuals, for a rival that wins the innovations and loses the plain RMSE by an
+    amount the block-to-block spread of a coloured noise's level accounts for."""
+    rn = np.asarray(resid_null, float)
+    ra = np.asarray(resid_alt, float)
+    rows = np.asarray(rows, bool) & np.isfinite(rn) & np.isfinite(ra)
+    lab = block_labels(t, rows, run_start, block_s)
+    good = lab >= 0
+    nb = int(lab.max()) + 1 if good.any() else 0
+    if nb < 3:
+        return PlainWorseTest(0.0, 1.0, nb)
+    d = np.bincount(lab[good], weights=(ra * ra - rn * rn)[good], minlength=nb)
+    sd = float(np.std(d, ddof=1))
+    if not sd > 0:
+        return PlainWorseTest(0.0, 1.0, nb)
+    tstat = float(np.mean(d) / (sd / math.sqrt(nb)))
+    return PlainWorseTest(tstat, float(stats.t.sf(tstat, nb - 1)), nb)
+
+
 def candidate_test(residual: np.ndarray, correction: np.ndarray, train_mask, test_mask, run_start, t,
                    **kw) -> PredictiveComparison:
     """Does a candidate's predicted change in torque (``correction``, fitted on the training rows)

@@ -51,3 +51,74 @@ def test_time_mechanisms_and_their_group_delay():
     mechs = [make_mechanism("transport_delay", delay_s=0.03), make_mechanism("actuator_lag", tau_s=0.05),
              make_mechanism("drag_torque", coeff_nm_per_rad_s=2.0)]
     assert group_delay_s(mechs) == pytest.approx(0.08)
+
+
+# --- the rival's plain error: larger by chance or larger ------------------------------------------
+
+def _ar1(rng, n, phi=0.9, sd=8.0):
+    e = rng.normal(0.0, sd * np.sqrt(1 - phi * phi), n)
+    out = np.empty(n)
+    out[0] = rng.normal(0.0, sd)
+    for k in range(1, n):
+        out[k] = phi * out[k - 1] + e[k]
+    return out
+
+
+def _rows(duration_s=40.0, rate_hz=100.0):
+    t = np.arange(0.0, duration_s, 1.0 / rate_hz)
+    run_start = np.zeros(t.size, bool)
+    run_start[0] = True
+    return t, run_start
+
+
+def test_plain_worse_test_holds_its_level_under_coloured_noise_and_sees_a_level():
+    from clutch_model.diagnosis.structure_test import plain_worse_test
+
+    t, run_start = _rows()
+    rows = np.ones(t.size, bool)
+    rejected = 0
+    for seed in range(200):
+        rng = np.random.default_rng(seed)
+        # two models equally good: their residuals share the noise and differ by equal misfits
+        noise = _ar1(rng, t.size)
+        a, b = _ar1(rng, t.size, 0.95, 2.0), _ar1(rng, t.size, 0.95, 2.0)
+        rejected += plain_worse_test(noise + a, noise + b, rows, run_start, t).p_value < 0.1
+    assert 0.04 <= rejected / 200 <= 0.18                  # a one-sided test at 10 %
+    rng = np.random.default_rng(1)
+    noise = _ar1(rng, t.size)
+    # a level of 5 N*m under AR(1) 0.9 noise of 8 N*m: its square beside the noise's block means
+    worse = plain_worse_test(noise, noise + 5.0, rows, run_start, t)
+    assert worse.p_value < 1e-3 and worse.t_stat > 0
+    assert plain_worse_test(noise + 5.0, noise, rows, run_start, t).t_stat < 0
+    assert plain_worse_test(noise, noise + 5.0, rows & (t < 2.0), run_start, t).p_value == 1.0   # < 3 blocks
+
+
+def test_a_force_path_rival_takes_the_name_when_its_larger_plain_error_is_chance():
+    from clutch_model.diagnosis.force_dynamics import PLAIN_WORSE_ALPHA, rival_takes_the_name
+    from clutch_model.diagnosis.selection import SelectionData, _compare
+    from clutch_model.diagnosis.structure_test import DEFAULT_MAX_ORDER
+
+    t, run_start = _rows(60.0)
+    rng = np.random.default_rng(5)
+    noise = _ar1(rng, t.size)
+    train = (t % 6.0) < 4.0                                  # 2 s of every 6 held out
+    data = SelectionData(y=noise, t=t, run_start=run_start, train_mask=train, test_mask=~train)
+    # the named model misses a short response at every force edge (what whitening sees) ...
+    edges = 6.0 * np.exp(-((t % 0.5) / 0.02))
+    r_named = noise + edges
+    # ... the rival has it, with a level of its own per 3 s that averages out (what plain squares see)
+    wander = np.repeat(rng.choice([-1.0, 1.0], int(np.ceil(t.size / 300))), 300)[:t.size] * 2.5
+    r_rival = noise + wander
+    head = _compare(data, r_named, r_rival, DEFAULT_MAX_ORDER)
+    assert head.t_stat > 4 and head.rmse_alt > head.rmse_null     # innovations for it, plain RMSE against
+    takes, worse = rival_takes_the_name(data, head, r_named, r_rival, 1e-3, 0.005)
+    assert takes and worse.p_value >= PLAIN_WORSE_ALPHA
+    # a level that is the rival's own misfit, not chance: refused
+    r_rival_level = noise + 2.5
+    head = _compare(data, r_named, r_rival_level, DEFAULT_MAX_ORDER)
+    takes, worse = rival_takes_the_name(data, head, r_named, r_rival_level, 1e-3, 0.005)
+    assert not takes and worse.p_value < PLAIN_WORSE_ALPHA
+    # the innovations not won: no plain test needed
+    takes, worse = rival_takes_the_name(data, _compare(data, r_rival, r_named, DEFAULT_MAX_ORDER), r_rival, r_named,
+                                        1e-3, 0.005)
+    assert not takes and worse is None
