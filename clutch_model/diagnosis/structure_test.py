@@ -116,17 +116,26 @@ def plain_cross_fit_test(residual: np.ndarray, prediction: np.ndarray, rows: np.
     r = np.asarray(residual, float)
     c = np.asarray(prediction, float)
     rows = np.asarray(rows, bool) & np.isfinite(r) & np.isfinite(c)
+    tstat, p, nb, d, good = block_sums_t(r * r - (r - c) ** 2, rows, run_start, t, block_s)
+    if d is None:
+        return PlainCrossFit(0.0, 1.0, nb, 0.0)
+    total = float(np.sum(r[good] ** 2))
+    return PlainCrossFit(tstat, p, nb, float(d.sum() / total) if total > 0 else 0.0)
+
+
+def block_sums_t(values: np.ndarray, rows: np.ndarray, run_start: np.ndarray, t: np.ndarray,
+                 block_s: float = BLOCK_S) -> tuple:
+    """Per-block sums of ``values`` over ``rows`` (block_labels) and the one-sided t of their
+    mean over blocks (B - 1 dof) -> (t, p, B, sums, labelled rows); sums None under 3 blocks."""
     lab = block_labels(t, rows, run_start, block_s)
     good = lab >= 0
     nb = int(lab.max()) + 1 if good.any() else 0
     if nb < 3:
-        return PlainCrossFit(0.0, 1.0, nb, 0.0)
-    d = np.bincount(lab[good], weights=(r * r - (r - c) ** 2)[good], minlength=nb)
-    total = float(np.sum(r[good] ** 2))
+        return 0.0, 1.0, nb, None, good
+    d = np.bincount(lab[good], weights=np.asarray(values, float)[good], minlength=nb)
     sd = float(np.std(d, ddof=1))
     tstat = float(np.mean(d) / (sd / math.sqrt(nb))) if sd > 0 else 0.0
-    return PlainCrossFit(tstat, float(stats.t.sf(tstat, nb - 1)), nb,
-                         float(d.sum() / total) if total > 0 else 0.0)
+    return tstat, float(stats.t.sf(tstat, nb - 1)), nb, d, good
 
 
 @dataclass
@@ -368,17 +377,8 @@ def plain_worse_test(resid_null: np.ndarray, resid_alt: np.ndarray, rows: np.nda
     rn = np.asarray(resid_null, float)
     ra = np.asarray(resid_alt, float)
     rows = np.asarray(rows, bool) & np.isfinite(rn) & np.isfinite(ra)
-    lab = block_labels(t, rows, run_start, block_s)
-    good = lab >= 0
-    nb = int(lab.max()) + 1 if good.any() else 0
-    if nb < 3:
-        return PlainWorseTest(0.0, 1.0, nb)
-    d = np.bincount(lab[good], weights=(ra * ra - rn * rn)[good], minlength=nb)
-    sd = float(np.std(d, ddof=1))
-    if not sd > 0:
-        return PlainWorseTest(0.0, 1.0, nb)
-    tstat = float(np.mean(d) / (sd / math.sqrt(nb)))
-    return PlainWorseTest(tstat, float(stats.t.sf(tstat, nb - 1)), nb)
+    tstat, p, nb, _, _ = block_sums_t(ra * ra - rn * rn, rows, run_start, t, block_s)
+    return PlainWorseTest(tstat, p, nb)
 
 
 def candidate_test(residual: np.ndarray, correction: np.ndarray, train_mask, test_mask, run_start, t,
