@@ -520,3 +520,23 @@ def test_a_decline_the_calibration_took_as_temperature_is_found_against_the_benc
     assert got == pytest.approx(truth, rel=0.1), what
     cal, ext = res.replay_rmse_nm["calibrated"], res.replay_rmse_nm["extended"]
     assert ext < 0.2 * cal, f"{what}; unseen bags: calibrated {cal:.2f}, extended {ext:.2f} N*m"
+    # the decline is no level: the bench friction moved by a constant does not account for it
+    assert check["friction_level"]["mechanism_better"], check["friction_level"]
+
+
+# The drive's friction 4 % below the bench's (a per-run friction level, outside the catalog) on
+# one 40 s drive: the calibration absorbed it, a friction degradation on the bench friction closed
+# 96 % of the gap and was named, and on the later drive (+5 %) the extended model was 64 N*m off
+# the true torque against 37 for the calibrated one. The bench friction moved by one constant
+# accounts for the gap as well (diagnosis/bench_anchor.py): `unexplained`, nothing written.
+def test_a_friction_level_off_the_bench_is_not_named_a_degradation(tmp_path):
+    res, what = _diagnosed(tmp_path, "run_friction_level", "long_drive", 8,
+                           {"run_friction_level": 0.06994948441216753})
+    assert res.verdict == "unexplained", what
+    check = res.report["selection"]["bench_anchor"]
+    assert check["absorbed"] and not check["friction_level"]["mechanism_better"], check
+    assert "named" not in check, check
+    # the level found is the drive's: mu about 4 % below the bench's (mu ~ 0.12-0.2)
+    assert -0.012 < check["friction_level"]["shift"] < -0.002, check["friction_level"]
+    cal, ext = res.replay_rmse_nm["calibrated"], res.replay_rmse_nm["extended"]
+    assert ext == pytest.approx(cal), f"{what}; unseen bags: calibrated {cal:.2f}, extended {ext:.2f} N*m"
