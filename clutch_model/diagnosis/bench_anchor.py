@@ -29,7 +29,7 @@ the calibrated one (its held-out mean square at most 24 % above over 26 such cam
 mechanism is tried.
 
 A mechanism that accounts for the gap must also beat the bench friction moved by one constant
-(``FrictionLevelFit``: mu_C and mu_S shifted by the same amount everywhere, one parameter as the
+(``fit_friction_level``: mu_C and mu_S shifted by the same amount everywhere, one parameter as the
 mechanism has): a car whose friction sits a few per cent off the bench's on the day (lining, oil)
 is a level, outside the catalog, and the answer is then ``unexplained``. Measured on
 run_friction_level@long_drive#8 (``--quick``, magnitude seed 20261129: the drive's friction 4 %
@@ -39,7 +39,7 @@ was 64.1 N*m off the true torque against 37.1 for the calibrated one.
 """
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -76,21 +76,25 @@ class _LevelObjective(CampaignObjective):
         return self.base.with_friction(a=apply_friction_correction(self.a0, delta))
 
 
+@dataclass
 class FrictionLevelFit:
-    """The bench friction moved by one constant (``shift``: added to mu_C and mu_S everywhere)
-    and fitted on the training rows (a selection.Fitted)."""
+    """The bench friction moved by one constant (``parameters["shift"]``: added to mu_C and
+    mu_S everywhere), fitted (a selection.Fitted): the model and its prediction on the campaign."""
 
-    id = "friction_level"
-
-    def __init__(self, base, ctx, mask, max_nfev: int = 20):
-        obj = _LevelObjective(base, ctx.campaign, np.asarray(mask, bool), noise_sigma_nm=ctx.sigma_nm)
-        x = solve_from(obj, np.zeros(1), max_nfev)
-        self.parameters = {"shift": float(x[0])}
-        self.model = obj.model_at(x)
-        self.predicted = obj.predict([x])[0]
+    parameters: dict
+    model: object
+    predicted: np.ndarray
+    id: str = "friction_level"
 
     def predict(self, data=None) -> np.ndarray:
         return self.predicted
+
+
+def fit_friction_level(base, ctx, mask, max_nfev: int = 20) -> FrictionLevelFit:
+    """The shift of mu_C and mu_S on ``base`` that fits the training rows ``mask`` best."""
+    obj = _LevelObjective(base, ctx.campaign, np.asarray(mask, bool), noise_sigma_nm=ctx.sigma_nm)
+    x = solve_from(obj, np.zeros(1), max_nfev)
+    return FrictionLevelFit({"shift": float(x[0])}, obj.model_at(x), obj.predict([x])[0])
 
 
 def _closed_share(cmp_gap, cmp_vs_bench) -> float:
@@ -196,7 +200,7 @@ def none_or_bench_anchored(data, sel, ctx, candidate_ids, alpha: float, min_gain
         return (Selection("unexplained", [], sel.steps, sel.final, sel.baseline_structure,
                           sel.remainder_structure, [cid, untold], left, why, sel.run_level), check.found)
     # a friction level off the bench's accounts for the gap as well: outside the catalog
-    level = FrictionLevelFit(bench_base, ctx, train)
+    level = fit_friction_level(bench_base, ctx, train)
     vs_level = check.compare(residual(data, level), residual(data, fitted))
     beats_level = check.significant(vs_level)
     check.found["friction_level"] = {"shift": level.parameters["shift"], "held_out_rmse": float(vs_level.rmse_null),
