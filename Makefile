@@ -9,6 +9,8 @@ PYTHON ?= python3.11
 VENV   := $(CURDIR)/.venv
 VPY    := $(VENV)/bin/python
 PYTEST_ARGS ?=
+# pytest-xdist workers for `make test` (auto: one per core; 0 runs in this process)
+PYTEST_WORKERS ?= auto
 
 export PIP_DISABLE_PIP_VERSION_CHECK := 1
 
@@ -36,7 +38,7 @@ $(EDITABLE_STAMP): pyproject.toml $(PKG_INITS) $(REQ_STAMP)
 	@touch $@
 
 test: venv
-	@rc=0; $(VPY) -m pytest -q -p no:cacheprovider $(PYTEST_ARGS) || rc=$$?; \
+	@rc=0; $(VPY) -m pytest -q -p no:cacheprovider -n $(PYTEST_WORKERS) --dist worksteal $(PYTEST_ARGS) || rc=$$?; \
 	if [ $$rc -eq 5 ]; then echo "make test: pytest collected no tests"; rc=0; fi; \
 	exit $$rc
 

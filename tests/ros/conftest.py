@@ -25,12 +25,23 @@ def _need_ros():
         pytest.skip("clutch_msgs is not built (make venv)")
 
 
+def _worker_domains() -> list[int]:
+    """The ROS domains (1..200) this pytest-xdist worker may use (all of them without xdist)."""
+    worker = os.environ.get("PYTEST_XDIST_WORKER", "")          # "gw0", "gw1", ...
+    count = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1") or 1)
+    index = int(worker[2:]) if worker.startswith("gw") and worker[2:].isdigit() else 0
+    return [d for d in range(1, 201) if d % count == index % count]
+
+
 @pytest.fixture(scope="module")
 def domain_id():
-    """A random ROS_DOMAIN_ID (1..200) for this module: subprocesses and the client use it."""
+    """A random ROS_DOMAIN_ID (1..200) for this module: subprocesses and the client use it.
+
+    Under pytest-xdist each worker draws from its own residue class modulo the number of
+    workers, so modules running at the same time on different workers never share a domain."""
     _need_ros()
     old = {k: os.environ.get(k) for k in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE")}
-    domain = random.randint(1, 200)
+    domain = random.choice(_worker_domains())
     os.environ["ROS_DOMAIN_ID"] = str(domain)
     # discovery on this host only (also for the subprocesses, which inherit the environment)
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
