@@ -35,7 +35,12 @@ is a level, outside the catalog, and the answer is then ``unexplained``. Measure
 run_friction_level@long_drive#8 (``--quick``, magnitude seed 20261129: the drive's friction 4 %
 below the bench's, one 40 s drive): a friction degradation on the bench friction closed 96 % of
 the gap (10.2 against 28.2 N*m) and was named; on the later drive, at +5 %, the extended model
-was 64.1 N*m off the true torque against 37.1 for the calibrated one.
+was 64.1 N*m off the true torque against 37.1 for the calibrated one. The same rule holds for a
+second cause beside a named one (``named_and_bench_anchored``): a 60 ms actuator lag on that drive
+was named, and a friction degradation beside it on the bench friction took the level as a second
+cause (64.0 N*m off on the later drive against 66.2 calibrated); the lag on the bench friction
+moved by one constant predicts the held-out spans as well (the pair better at t = 2.9), so the
+lag alone is named (36.6 N*m).
 """
 from __future__ import annotations
 
@@ -122,6 +127,7 @@ class _Check:
                       "calibrated_held_out_rmse": float(gap.rmse_alt), "calibration_t": float(gap.t_stat),
                       "gap_frac": float(gap_frac), "absorbed": self.absorbed, "mechanisms": {}}
         self.passing = []
+        self.level = None       # (FrictionLevelFit, its comparison with the mechanism) once beats_level ran
 
     def significant(self, cmp) -> bool:
         return cmp.significant(self.alpha, self.min_gain_frac, plain_gain=True)
@@ -146,6 +152,25 @@ class _Check:
             f"calibrated better t = {vs_cal.t_stat:.1f}" + ("  <- accounts for it" if ok else ""))
         if ok:
             self.passing.append((float(vs_bench.rmse_alt), cid, fitted, r, vs_bench))
+
+    def beats_level(self, cid: str, fitted, level_base, ctx, train, say) -> bool:
+        """Does ``fitted`` (``cid`` on the bench friction) predict the held-out rows better than
+        ``level_base`` with its friction moved by one constant (``fit_friction_level``)? The
+        figures go to ``found["friction_level"]``."""
+        from clutch_model.diagnosis.selection import residual
+
+        level = fit_friction_level(level_base, ctx, train)
+        vs_level = self.compare(residual(self.data, level), residual(self.data, fitted))
+        beats = self.significant(vs_level)
+        self.level = (level, vs_level)
+        self.found["friction_level"] = {"shift": level.parameters["shift"], "held_out_rmse": float(vs_level.rmse_null),
+                                        "mechanism_better_t": float(vs_level.t_stat), "mechanism_better": beats}
+        say(f"  the bench friction moved by a constant ({level.parameters['shift']:+.4f} in mu): held-out RMSE "
+            f"{vs_level.rmse_null:.2f} N*m; {cid} better at t = {vs_level.t_stat:.1f}"
+            + ("" if beats else ": a friction level, not a catalog mechanism"))
+        if not beats:
+            self.found.pop("named", None)
+        return beats
 
     def chosen(self):
         """-> (best (cid, fitted, comparison against the bench model) or None, the runner-up's id when
@@ -200,16 +225,8 @@ def none_or_bench_anchored(data, sel, ctx, candidate_ids, alpha: float, min_gain
         return (Selection("unexplained", [], sel.steps, sel.final, sel.baseline_structure,
                           sel.remainder_structure, [cid, untold], left, why, sel.run_level), check.found)
     # a friction level off the bench's accounts for the gap as well: outside the catalog
-    level = fit_friction_level(bench_base, ctx, train)
-    vs_level = check.compare(residual(data, level), residual(data, fitted))
-    beats_level = check.significant(vs_level)
-    check.found["friction_level"] = {"shift": level.parameters["shift"], "held_out_rmse": float(vs_level.rmse_null),
-                                     "mechanism_better_t": float(vs_level.t_stat), "mechanism_better": beats_level}
-    say(f"  the bench friction moved by a constant ({level.parameters['shift']:+.4f} in mu): held-out RMSE "
-        f"{vs_level.rmse_null:.2f} N*m; {cid} better at t = {vs_level.t_stat:.1f}"
-        + ("" if beats_level else ": a friction level, not a catalog mechanism"))
-    if not beats_level:
-        check.found.pop("named", None)
+    if not check.beats_level(cid, fitted, bench_base, ctx, train, say):
+        level, vs_level = check.level
         why = (f"{sel.reason}; but the calibration absorbed a discrepancy with the bench's friction "
                f"({check.gap_text()}) that {cid} on the bench friction accounts for, and so does the bench "
                f"friction moved by a constant (mu {level.parameters['shift']:+.4f}: {vs_level.rmse_null:.2f} N*m, "
@@ -236,7 +253,10 @@ def named_and_bench_anchored(data, sel, ctx, candidate_ids, alpha: float, min_ga
     ``none_or_bench_anchored`` does for the calibrated model -> (selection, found or None).
 
     On actuator_lag+friction_degradation over one 40 s drive the selection named the lag and
-    the calibration had taken the decline as a temperature effect."""
+    the calibration had taken the decline as a temperature effect.
+
+    The second cause must also beat the named cause on the bench friction moved by one constant
+    (``_Check.beats_level``), as in ``none_or_bench_anchored``: else the named cause stands alone."""
     from clutch_model.diagnosis.candidates import ModelFit, fit_alone
     from clutch_model.diagnosis.selection import Cause, parameter_ci95, residual
     from clutch_model.diagnosis.structure_test import DEFAULT_MAX_ORDER
@@ -266,6 +286,9 @@ def named_and_bench_anchored(data, sel, ctx, candidate_ids, alpha: float, min_ga
     if best is None or untold is not None:
         return sel, check.found        # the named cause stands; what else the calibration took is not told apart
     cid, pair, vs_named = best
+    # the named cause on the bench friction moved by a constant as well: a level, not a second cause
+    if not check.beats_level(cid, pair, named_on_bench.model, ctx, train, say):
+        return sel, check.found
     first_params = {k: float(v) for m in pair.model.mechanisms if m.id == first for k, v in m.values.items()
                     if k in sel.causes[0].parameters}
     first_base = pair.model.with_mechanisms([m for m in pair.model.mechanisms if m.id != first])

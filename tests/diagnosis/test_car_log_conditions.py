@@ -26,7 +26,7 @@ import pytest
 
 from clutch_model.plant.mechanisms import CATALOG
 from clutch_model.virtual_car.car_logs import EFFECTS
-from clutch_model.virtual_car.hidden_campaigns import (CONDITIONS, check_campaign, judge,
+from clutch_model.virtual_car.hidden_campaigns import (CONDITIONS, Case, check_campaign, judge,
                                                         make_hidden_campaign, named_causes,
                                                         run_clutch_sim, score_replay_csv)
 
@@ -46,9 +46,6 @@ FAST = [
     # a slow sensor drift (OU, 36 s) over two 30 s runs, time spans held out, alone read
     # `unexplained` (its lag twin is in SLOW, below)
     ("slow_drift", "none", 1),
-    # a 70 ms actuator lag under AR(1) 0.95 noise: torque_sensor_lag leads on the gain but loses
-    # head to head (p = 0.0002); without the head-to-head rule this read `unexplained`
-    ("ar1", "actuator_lag", 1),
     # a 70 ms actuator lag under 10 Hz band-limited torque noise: the model's slip noise made a
     # torque-sensor lag win the whitened comparisons (t = 693 against 37, a wrong name) until the
     # noise models were floored at the model's own noise and the slip smoothed (input_hold)
@@ -127,6 +124,12 @@ SLOW = [
     # "structure" after the lag (t = 6.2, `unexplained`) until the plain remainder fit's noise
     # model came from its cross-fitted residual and had to beat the null's own noise model too
     ("slow_drift", "actuator_lag", 1),
+    # a 70 ms actuator lag under AR(1) 0.95 noise: torque_sensor_lag leads on the gain but loses
+    # head to head (p = 0.0002); without the head-to-head rule this read `unexplained`. Moved here
+    # at stop 47 (`make test` 27 min): the head-to-head rule keeps its CI twin in
+    # test_an_actuator_lag_is_told_from_a_sensor_lag, the lag its CI cells under lowpass and
+    # long_drive, AR(1) 0.95 noise ("ar1", "none") and ("ar1", "drag_torque") of NEVER_WRONG
+    ("ar1", "actuator_lag", 1),
 ]
 # Measured on the slow set (2026-11-24, diag-none; 9 of 12 pass). Misses, with the reason:
 SLOW_MEASURED_MISSES = {
@@ -498,6 +501,8 @@ def test_a_lag_is_not_taken_by_a_force_path_that_refits_the_friction(tmp_path):
     # the bench since stop 43 (diagnosis/bench_anchor.py)
     assert "friction_degradation" in named_causes(res.report)[1], what
     assert res.report["selection"]["bench_anchor"]["named"] == "friction_degradation", what
+    # the decline is no level beside the lag (since stop 47: _Check.beats_level)
+    assert res.report["selection"]["bench_anchor"]["friction_level"]["mechanism_better"], what
     cal, ext = res.replay_rmse_nm["calibrated"], res.replay_rmse_nm["extended"]
     assert ext < 0.2 * cal, f"{what}; unseen bags: calibrated {cal:.2f}, extended {ext:.2f} N*m"
 
@@ -522,6 +527,29 @@ def test_a_decline_the_calibration_took_as_temperature_is_found_against_the_benc
     assert ext < 0.2 * cal, f"{what}; unseen bags: calibrated {cal:.2f}, extended {ext:.2f} N*m"
     # the decline is no level: the bench friction moved by a constant does not account for it
     assert check["friction_level"]["mechanism_better"], check["friction_level"]
+
+
+# A 60 ms actuator lag on a drive whose friction sits 4 % below the bench's (a per-run friction
+# level, outside the catalog), one 40 s drive: the lag was named, the calibration had absorbed
+# the level, and a friction degradation beside the lag on the bench friction accounted for it
+# and was named as a second cause (wrong: on the later drive, at +5 %, 64.0 N*m off the true
+# torque against 66.2 calibrated). The lag on the bench friction moved by one constant accounts
+# for it as well (diagnosis/bench_anchor.py, _Check.beats_level): the lag alone is named and the
+# later drive reads 36.6 N*m.
+def test_a_friction_level_beside_a_named_cause_is_not_a_second_cause(tmp_path):
+    case = Case("actuator_lag+run_friction_level", "outside", mechanisms=("actuator_lag",),
+                effects=("run_friction_level",))
+    res, what = _diagnosed(tmp_path, case, "long_drive", 8,
+                           {"actuator_lag": 0.06, "run_friction_level": 0.06994948441216753})
+    assert named_causes(res.report) == ("actuator_lag", ["actuator_lag"]), what
+    tau = res.report["cause"]["parameters"]["tau_s"]
+    assert tau == pytest.approx(0.06, rel=0.1), what
+    check = res.report["selection"]["bench_anchor"]
+    assert check["beside"] == "actuator_lag" and check["absorbed"], check
+    assert not check["friction_level"]["mechanism_better"] and "named" not in check, check
+    assert -0.012 < check["friction_level"]["shift"] < -0.002, check["friction_level"]
+    cal, ext = res.replay_rmse_nm["calibrated"], res.replay_rmse_nm["extended"]
+    assert ext < 0.7 * cal, f"{what}; unseen bags: calibrated {cal:.2f}, extended {ext:.2f} N*m"
 
 
 # The drive's friction 4 % below the bench's (a per-run friction level, outside the catalog) on

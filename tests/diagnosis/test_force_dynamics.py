@@ -6,6 +6,7 @@ from scipy.integrate import solve_ivp
 
 from clutch_model.diagnosis.force_dynamics import group_delay_s, second_order_force, time_mechanism_ids
 from clutch_model.plant.mechanisms import make_mechanism
+from clutch_model.virtual_car.signals import AR1Noise
 
 
 def _reference(t, force, f_n, zeta):
@@ -56,12 +57,8 @@ def test_time_mechanisms_and_their_group_delay():
 # --- the rival's plain error: larger by chance or larger ------------------------------------------
 
 def _ar1(rng, n, phi=0.9, sd=8.0):
-    e = rng.normal(0.0, sd * np.sqrt(1 - phi * phi), n)
-    out = np.empty(n)
-    out[0] = rng.normal(0.0, sd)
-    for k in range(1, n):
-        out[k] = phi * out[k - 1] + e[k]
-    return out
+    """AR(1) noise of stationary std ``sd``: the virtual car's own noise class."""
+    return AR1Noise(sd, phi).sample(rng, np.zeros(n))
 
 
 def _rows(duration_s=40.0, rate_hz=100.0):

@@ -18,6 +18,7 @@ import pytest
 from clutch_model.diagnosis.fitting import apply_friction_correction, fit_candidate
 from clutch_model.diagnosis.friction_ridge import choose_ridge_factor, fold_index, held_to_the_data
 from clutch_model.prediction import predict_campaign
+from clutch_model.virtual_car.signals import AR1Noise
 from clutch_model.formats.bag_reader import read_bags
 from clutch_model.virtual_car.hidden_campaigns import (check_campaign, make_hidden_campaign,
                                                        unseen_stamps_rmse_nm)
@@ -33,15 +34,8 @@ def inputs():
 
 
 def _ar1(n_per_run, phi, rng):
-    out = []
-    for n in n_per_run:
-        e = rng.normal(0.0, SIGMA_NM * math.sqrt(1 - phi * phi), n)
-        x = np.empty(n)
-        x[0] = rng.normal(0.0, SIGMA_NM)
-        for k in range(1, n):
-            x[k] = phi * x[k - 1] + e[k]
-        out.append(x)
-    return np.concatenate(out)
+    """AR(1) noise of std SIGMA_NM, started afresh on every run (the virtual car's noise class)."""
+    return np.concatenate([AR1Noise(SIGMA_NM, phi).sample(rng, np.zeros(n)) for n in n_per_run])
 
 
 def _fit_rows(campaign):
