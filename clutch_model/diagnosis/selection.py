@@ -1182,12 +1182,13 @@ def select_causes(data: SelectionData, baseline, candidates: Sequence, alpha: fl
                   min_gain_frac: float = MIN_GAIN_FRAC, lookalike_alpha: float = LOOKALIKE_ALPHA,
                   max_causes: int = MAX_CAUSES, intervals: bool = True, max_order: int = DEFAULT_MAX_ORDER,
                   refine_top: int = 3, structure_min_gain_frac: float | None = None,
-                  plain_gain: bool = False, progress=None) -> Selection:
+                  plain_gain: bool = False, progress=None, after_first_step=None) -> Selection:
     """Forward selection of causes (see the module docstring). ``baseline`` is a fitted model
     (``predict(data)``) without any candidate. ``min_gain_frac``: materiality of a candidate
     (cut of the held-out innovation variance); ``structure_min_gain_frac``: of structure the
     flexible residual model finds (default: the same); ``plain_gain``: a cause must also lower
-    the plain held-out RMSE."""
+    the plain held-out RMSE. ``after_first_step``: called with the first SelectionStep (every
+    candidate scored against the baseline) before the selection goes on; it may raise to stop it."""
     if structure_min_gain_frac is None:
         structure_min_gain_frac = min_gain_frac
     say = progress or (lambda msg: None)
@@ -1205,6 +1206,8 @@ def select_causes(data: SelectionData, baseline, candidates: Sequence, alpha: fl
     while remaining and len(named) < max_causes:
         st, best = step(current, named, remaining)
         steps.append(st)
+        if after_first_step is not None and len(steps) == 1:
+            after_first_step(st)
         if best is None and not named:
             ahead = _look_ahead(data, baseline, resid_cur, bool(base_struct is not None and base_struct.structured),
                                 st, remaining, step, cand_by_id, alpha, min_gain_frac, plain_gain, max_order, say)

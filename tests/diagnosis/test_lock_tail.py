@@ -128,3 +128,38 @@ def test_tail_covers_every_candidate_that_predicts_the_held_out_data():
     assert _lock_tail_of(NS(causes=[], cause_id="unexplained", scores=quiet,
                             selection=NS(closest=["transport_delay"]))) == pytest.approx(0.3)
     assert _lock_tail_of(NS(causes=[], cause_id="none", scores=quiet, selection=None)) == 0.0
+
+
+def test_the_first_step_asks_for_its_tail_before_the_selection_goes_on():
+    """The first selection step (every catalog mechanism fitted alone) already holds the
+    candidates whose tail ``_lock_tail_of`` would count after a whole diagnosis: the screen stops
+    the diagnosis there with the longest tail a significant candidate asks for, and lets it go
+    on when none asks for more than the slack."""
+    from types import SimpleNamespace as NS
+
+    from clutch_model.diagnosis.engine import (LOCK_TAIL_SCREEN_MARGIN, LOCK_TAIL_SLACK_S, WiderLockTail, _lock_tail_of,
+                                               _lock_tail_screen)
+
+    def score(cid, significant, **params):
+        return NS(id=cid, significant=significant, fitted=NS(parameters=params))
+
+    step = NS(scores=[score("actuator_lag", True, tau_s=0.1), score("torque_sensor_lag", True, tau_s=0.04),
+                      score("transport_delay", True, delay_s=0.09), score("drag_torque", True, coeff_nm_per_rad_s=3.0)])
+    with pytest.raises(WiderLockTail) as raised:
+        _lock_tail_screen(0.0)(step)
+    assert raised.value.tail_s == pytest.approx(LOCK_TAIL_SCREEN_MARGIN * 3 * 0.04)
+    assert raised.value.which == "torque_sensor_lag"
+    # the tail the whole diagnosis would have asked for with nothing named, with the margin that
+    # stands for the named causes' upper bounds
+    whole = NS(causes=[], cause_id="none", scores=step.scores, selection=NS(closest=[]))
+    assert raised.value.tail_s == pytest.approx(LOCK_TAIL_SCREEN_MARGIN * _lock_tail_of(whole))
+    assert LOCK_TAIL_SCREEN_MARGIN >= 1.0
+    # on rows with that tail left out the same step asks for nothing more: the diagnosis goes on
+    _lock_tail_screen(3 * 0.04 + LOCK_TAIL_SLACK_S)(step)
+    _lock_tail_screen(3 * 0.04 - 0.5 * LOCK_TAIL_SLACK_S)(step)      # within the slack
+    with pytest.raises(WiderLockTail):
+        _lock_tail_screen(3 * 0.04 - 2.0 * LOCK_TAIL_SLACK_S)(step)
+    # not significant, or within the slack: the diagnosis goes on
+    _lock_tail_screen(0.0)(NS(scores=[score("transport_delay", False, delay_s=0.3),
+                                      score("transport_delay", True, delay_s=0.5 * LOCK_TAIL_SLACK_S)]))
+    _lock_tail_screen(0.0)(NS(scores=[]))
