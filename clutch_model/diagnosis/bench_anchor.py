@@ -127,7 +127,6 @@ class _Check:
                       "calibrated_held_out_rmse": float(gap.rmse_alt), "calibration_t": float(gap.t_stat),
                       "gap_frac": float(gap_frac), "absorbed": self.absorbed, "mechanisms": {}}
         self.passing = []
-        self.level = None       # (FrictionLevelFit, its comparison with the mechanism) once beats_level ran
 
     def significant(self, cmp) -> bool:
         return cmp.significant(self.alpha, self.min_gain_frac, plain_gain=True)
@@ -153,16 +152,16 @@ class _Check:
         if ok:
             self.passing.append((float(vs_bench.rmse_alt), cid, fitted, r, vs_bench))
 
-    def beats_level(self, cid: str, fitted, level_base, ctx, train, say) -> bool:
+    def against_level(self, cid: str, fitted, level_base, ctx, train, say) -> tuple:
         """Does ``fitted`` (``cid`` on the bench friction) predict the held-out rows better than
-        ``level_base`` with its friction moved by one constant (``fit_friction_level``)? The
-        figures go to ``found["friction_level"]``."""
+        ``level_base`` with its friction moved by one constant (``fit_friction_level``)?
+        -> (it does, the level fit, the comparison: the level the null); the figures also go to
+        ``found["friction_level"]``."""
         from clutch_model.diagnosis.selection import residual
 
         level = fit_friction_level(level_base, ctx, train)
         vs_level = self.compare(residual(self.data, level), residual(self.data, fitted))
         beats = self.significant(vs_level)
-        self.level = (level, vs_level)
         self.found["friction_level"] = {"shift": level.parameters["shift"], "held_out_rmse": float(vs_level.rmse_null),
                                         "mechanism_better_t": float(vs_level.t_stat), "mechanism_better": beats}
         say(f"  the bench friction moved by a constant ({level.parameters['shift']:+.4f} in mu): held-out RMSE "
@@ -170,7 +169,7 @@ class _Check:
             + ("" if beats else ": a friction level, not a catalog mechanism"))
         if not beats:
             self.found.pop("named", None)
-        return beats
+        return beats, level, vs_level
 
     def chosen(self):
         """-> (best (cid, fitted, comparison against the bench model) or None, the runner-up's id when
@@ -225,8 +224,8 @@ def none_or_bench_anchored(data, sel, ctx, candidate_ids, alpha: float, min_gain
         return (Selection("unexplained", [], sel.steps, sel.final, sel.baseline_structure,
                           sel.remainder_structure, [cid, untold], left, why, sel.run_level), check.found)
     # a friction level off the bench's accounts for the gap as well: outside the catalog
-    if not check.beats_level(cid, fitted, bench_base, ctx, train, say):
-        level, vs_level = check.level
+    beats_level, level, vs_level = check.against_level(cid, fitted, bench_base, ctx, train, say)
+    if not beats_level:
         why = (f"{sel.reason}; but the calibration absorbed a discrepancy with the bench's friction "
                f"({check.gap_text()}) that {cid} on the bench friction accounts for, and so does the bench "
                f"friction moved by a constant (mu {level.parameters['shift']:+.4f}: {vs_level.rmse_null:.2f} N*m, "
@@ -256,7 +255,7 @@ def named_and_bench_anchored(data, sel, ctx, candidate_ids, alpha: float, min_ga
     the calibration had taken the decline as a temperature effect.
 
     The second cause must also beat the named cause on the bench friction moved by one constant
-    (``_Check.beats_level``), as in ``none_or_bench_anchored``: else the named cause stands alone."""
+    (``_Check.against_level``), as in ``none_or_bench_anchored``: else the named cause stands alone."""
     from clutch_model.diagnosis.candidates import ModelFit, fit_alone
     from clutch_model.diagnosis.selection import Cause, parameter_ci95, residual
     from clutch_model.diagnosis.structure_test import DEFAULT_MAX_ORDER
@@ -287,7 +286,7 @@ def named_and_bench_anchored(data, sel, ctx, candidate_ids, alpha: float, min_ga
         return sel, check.found        # the named cause stands; what else the calibration took is not told apart
     cid, pair, vs_named = best
     # the named cause on the bench friction moved by a constant as well: a level, not a second cause
-    if not check.beats_level(cid, pair, named_on_bench.model, ctx, train, say):
+    if not check.against_level(cid, pair, named_on_bench.model, ctx, train, say)[0]:
         return sel, check.found
     first_params = {k: float(v) for m in pair.model.mechanisms if m.id == first for k, v in m.values.items()
                     if k in sel.causes[0].parameters}

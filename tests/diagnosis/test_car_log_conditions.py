@@ -501,7 +501,7 @@ def test_a_lag_is_not_taken_by_a_force_path_that_refits_the_friction(tmp_path):
     # the bench since stop 43 (diagnosis/bench_anchor.py)
     assert "friction_degradation" in named_causes(res.report)[1], what
     assert res.report["selection"]["bench_anchor"]["named"] == "friction_degradation", what
-    # the decline is no level beside the lag (since stop 47: _Check.beats_level)
+    # the decline is no level beside the lag (since stop 47: _Check.against_level)
     assert res.report["selection"]["bench_anchor"]["friction_level"]["mechanism_better"], what
     cal, ext = res.replay_rmse_nm["calibrated"], res.replay_rmse_nm["extended"]
     assert ext < 0.2 * cal, f"{what}; unseen bags: calibrated {cal:.2f}, extended {ext:.2f} N*m"
@@ -534,7 +534,7 @@ def test_a_decline_the_calibration_took_as_temperature_is_found_against_the_benc
 # the level, and a friction degradation beside the lag on the bench friction accounted for it
 # and was named as a second cause (wrong: on the later drive, at +5 %, 64.0 N*m off the true
 # torque against 66.2 calibrated). The lag on the bench friction moved by one constant accounts
-# for it as well (diagnosis/bench_anchor.py, _Check.beats_level): the lag alone is named and the
+# for it as well (diagnosis/bench_anchor.py, _Check.against_level): the lag alone is named and the
 # later drive reads 36.6 N*m.
 def test_a_friction_level_beside_a_named_cause_is_not_a_second_cause(tmp_path):
     case = Case("actuator_lag+run_friction_level", "outside", mechanisms=("actuator_lag",),
