@@ -22,6 +22,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field, replace
+from functools import partial
 
 import numpy as np
 
@@ -354,8 +355,7 @@ def _lock_tail_screen(tail_s: float):
     Measured on actuator_lag@car#8 (magnitude seed 20261129): the first diagnosis, done in full
     only to learn that tail, was 72 of the cell's 107 s."""
     def check(step) -> None:
-        need = {sc.id: lock_tail_needed_s([{"id": sc.id, "parameters": sc.fitted.parameters}])
-                for sc in step.scores if sc.significant}
+        need = {sc.id: _candidate_tail_s(sc.id, sc.fitted) for sc in step.scores if sc.significant}
         which = max(need, key=need.get, default=None)
         if which is not None and need[which] > tail_s + LOCK_TAIL_SLACK_S:
             raise WiderLockTail(LOCK_TAIL_SCREEN_MARGIN * need[which], which)
@@ -416,8 +416,13 @@ def _lock_tail_of(d: "Diagnosis") -> float:
     fitted = {sc.id: sc.fitted for sc in d.scores}
     alike = [cid for cid in d.selection.closest if cid in fitted] if d.cause_id == "unexplained" else []
     alike += [sc.id for sc in d.scores if sc.significant]
-    need += [lock_tail_needed_s([{"id": cid, "parameters": fitted[cid].parameters}]) for cid in alike]
+    need += [_candidate_tail_s(cid, fitted[cid]) for cid in alike]
     return max(need, default=0.0)
+
+
+def _candidate_tail_s(cid: str, fitted) -> float:
+    """The lock tail one candidate asks for at its fitted parameters (no interval)."""
+    return lock_tail_needed_s([{"id": cid, "parameters": fitted.parameters}])
 
 
 def with_lock_tail(campaign: Campaign, lock_results: list, tail_s: float) -> tuple:
@@ -560,12 +565,9 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
     cands = [MechanismCandidate(cid, ctx) for cid in ids]
     if fit_executor is not None:
         fit_executor.register(cands)
-    select = lambda d_, b_, c_: select_causes(d_, b_, c_, alpha=ALPHA, min_gain_frac=NAMED_GAIN_FRAC,
-                                              structure_min_gain_frac=STRUCTURE_GAIN_FRAC, plain_gain=True,
-                                              progress=say)
-    sel = select_causes(data, base, cands, alpha=ALPHA, min_gain_frac=NAMED_GAIN_FRAC,
-                        structure_min_gain_frac=STRUCTURE_GAIN_FRAC, plain_gain=True, progress=say,
-                        after_first_step=first_step)
+    select = partial(select_causes, alpha=ALPHA, min_gain_frac=NAMED_GAIN_FRAC,
+                     structure_min_gain_frac=STRUCTURE_GAIN_FRAC, plain_gain=True, progress=say)
+    sel = select(data, base, cands, after_first_step=first_step)
     # the selection again with every fit's correction at the data's ridge (ridged_selection.py)
     sel, base_r, cands_r, ctx_r, ridged = selection_at_the_data_ridge(
         select, data, sel, written, cal_base, ctx, ids, ridge, fit_mask & scored, ALPHA, STRUCTURE_GAIN_FRAC,
