@@ -23,14 +23,13 @@ from dataclasses import replace
 
 import numpy as np
 
-from clutch_model.diagnosis.candidates import fit_job, refine_job
+from clutch_model.diagnosis.candidates import fit_job, refine_job, rows_digest
 
 REFINE_TOP = 3          # select_causes' default refine_top: the refits worth submitting ahead
 
 
 def _digest(mask) -> str:
-    m = np.ascontiguousarray(np.asarray(mask, bool))
-    return hashlib.sha1(np.packbits(m).tobytes() + str(m.size).encode()).hexdigest()
+    return rows_digest(mask).hex()
 
 
 def _train_mse(fitted, train) -> float:

@@ -31,7 +31,7 @@ at it. Its answer is taken only when
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 from clutch_model.diagnosis.candidates import MechanismCandidate, baseline_fit
 from clutch_model.diagnosis.friction_ridge import ridge_label
@@ -82,7 +82,7 @@ def selection_at_the_data_ridge(select, data, first, written, cal_base, ctx, ids
         return first, None, None, None, None
     label = ridge_label(ridge.factor)
     say(f"selection again with every friction correction at ridge x{label}")
-    ctx_r = replace(ctx, friction_ridge_factor=ridge.factor)
+    ctx_r = ctx.at_friction_ridge(ridge.factor)
     base_r = baseline_fit(written, cal_base, ctx_r, mask)
     cands_r = [MechanismCandidate(cid, ctx_r) for cid in ids]
     if fit_executor is not None:
