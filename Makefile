@@ -11,6 +11,9 @@ VPY    := $(VENV)/bin/python
 PYTEST_ARGS ?=
 # pytest-xdist workers for `make test` (auto: one per core; 0 runs in this process)
 PYTEST_WORKERS ?= auto
+# with a worker per core, the libraries' own threads (numba's batches, OpenBLAS) only compete
+# with the other workers for the cores and spin while they wait: one thread each
+TEST_THREADS := $(if $(filter 0,$(PYTEST_WORKERS)),,NUMBA_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1)
 
 export PIP_DISABLE_PIP_VERSION_CHECK := 1
 
@@ -38,7 +41,7 @@ $(EDITABLE_STAMP): pyproject.toml $(PKG_INITS) $(REQ_STAMP)
 	@touch $@
 
 test: venv
-	@rc=0; $(VPY) -m pytest -q -p no:cacheprovider -n $(PYTEST_WORKERS) --dist worksteal $(PYTEST_ARGS) || rc=$$?; \
+	@rc=0; $(TEST_THREADS) $(VPY) -m pytest -q -p no:cacheprovider -n $(PYTEST_WORKERS) --dist worksteal $(PYTEST_ARGS) || rc=$$?; \
 	if [ $$rc -eq 5 ]; then echo "make test: pytest collected no tests"; rc=0; fi; \
 	exit $$rc
 

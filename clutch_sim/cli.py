@@ -61,6 +61,9 @@ def _main(argv=None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     interrupts.install()
+    from clutch_model.threads import limit_blas_threads
+
+    limit_blas_threads()
     try:
         try:
             return int(args.func(args) or 0)

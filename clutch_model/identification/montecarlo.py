@@ -150,11 +150,14 @@ class MonteCarloResult:
 
 
 def _worker_warmup(threads=None):
-    """Load the compiled batch kernel in a Dask worker (numba cache) before the timed work."""
+    """Load the compiled batch kernel in a Dask worker (numba cache) before the timed work, and
+    limit its BLAS threads as the command line does (clutch_model.threads)."""
     import numba
 
     from clutch_model.plant.simulate import simulate_batch
+    from clutch_model.threads import limit_blas_threads
 
+    limit_blas_threads()          # as the command line does: the same numbers as a serial run
     if threads:
         numba.set_num_threads(max(1, min(int(threads), numba.config.NUMBA_NUM_THREADS)))
     from clutch_model.plant.params import load_model
