@@ -86,12 +86,22 @@ FAST = [
     # 0.63 N*m/(rad/s) was named beside an 18 % hysteresis (a wrong second cause) until the
     # rows around each zero crossing were left out (lockup.LockupResult.crossings)
     ("sign_changes", "actuator_hysteresis", 1),
+    # Back from the slow set at stop 48 (one numba and one BLAS thread per xdist worker took
+    # `make test` from 26.6 to 15.4 min):
+    # no cause on the car condition (a negligible hysteresis was once named here)
+    ("car", "none", 44),
+    # a 70 ms actuator lag under AR(1) 0.95 noise: torque_sensor_lag leads on the gain but loses
+    # head to head (p = 0.0002); without the head-to-head rule this read `unexplained`
+    ("ar1", "actuator_lag", 1),
+    # a 70 ms actuator lag with friction degradation under AR(1) 0.95 noise: the degradation's
+    # twin (its friction kept, the mechanism taken out) fitted the early held-out run as well as
+    # it (`unexplained`) until the twin became the friction refitted alone
+    ("ar1", "actuator_lag+friction_degradation", 1),
 ]
 SLOW = [
     ("held", "none", 41),
     ("median", "none", 42),
     ("drift", "none", 43),
-    ("car", "none", 44),
     ("car", "actuator_hysteresis", 45),
     ("lab", "actuator_lag+friction_degradation", 46),
     ("lockup", "transport_delay+drag_torque", 47),
@@ -109,10 +119,6 @@ SLOW = [
     # the noise model fitted to what it leaves (the other's slow misfit is forecast from its own
     # past), so the first step named nothing (`none`) until the look-ahead step
     ("lowpass", "spring_preload+torque_offset", 1),
-    # a 70 ms actuator lag with friction degradation under AR(1) 0.95 noise: the degradation's
-    # twin (its friction kept, the mechanism taken out) fitted the early held-out run as well as
-    # it (`unexplained`) until the twin became the friction refitted alone
-    ("ar1", "actuator_lag+friction_degradation", 1),
     # Three more, moved here at stop 38 (`make test` had grown to 22 min): each keeps a CI twin.
     # Two causes at once: ("held", "transport_delay+drag_torque", 1); the fade lookalike:
     # ("lowpass", "slip_power_fade", 3); the slow drift: ("slow_drift", "none", 1) and the
@@ -124,12 +130,6 @@ SLOW = [
     # "structure" after the lag (t = 6.2, `unexplained`) until the plain remainder fit's noise
     # model came from its cross-fitted residual and had to beat the null's own noise model too
     ("slow_drift", "actuator_lag", 1),
-    # a 70 ms actuator lag under AR(1) 0.95 noise: torque_sensor_lag leads on the gain but loses
-    # head to head (p = 0.0002); without the head-to-head rule this read `unexplained`. Moved here
-    # at stop 47 (`make test` 27 min): the head-to-head rule keeps its CI twin in
-    # test_an_actuator_lag_is_told_from_a_sensor_lag, the lag its CI cells under lowpass and
-    # long_drive, AR(1) 0.95 noise ("ar1", "none") and ("ar1", "drag_torque") of NEVER_WRONG
-    ("ar1", "actuator_lag", 1),
 ]
 # Measured on the slow set (2026-11-24, diag-none; 9 of 12 pass). Misses, with the reason:
 SLOW_MEASURED_MISSES = {
@@ -269,11 +269,11 @@ def test_rate_limited_actuator_is_found_beyond_the_catalog(tmp_path):
 # An actuator lag with a transport delay (54 + 96 ms): the lag named first took up the pair's
 # group delay, a delay fitted on top of it as it was only added delay, and the delay alone was
 # named (lab#3, ar1#3 of the matrix; a missed second cause) until a time mechanism fitted on
-# top of another moved that one with it (fitting.co_fitted_ids). Both run with -m slow; the co-fit
-# is checked in CI by test_candidate_fit.py::test_a_time_mechanism_on_top_of_another_moves_it_back.
+# top of another moved that one with it (fitting.co_fitted_ids). The lab cell runs in CI (since
+# stop 48), the ar1 cell with -m slow; the co-fit alone is checked by
+# test_candidate_fit.py::test_a_time_mechanism_on_top_of_another_moves_it_back.
 @pytest.mark.parametrize("condition,seed,magnitudes", [
-    pytest.param("lab", 3, {"actuator_lag": 0.05381363382159282, "transport_delay": 0.09639873809998827},
-                 marks=pytest.mark.slow),
+    ("lab", 3, {"actuator_lag": 0.05381363382159282, "transport_delay": 0.09639873809998827}),
     pytest.param("ar1", 3, {"actuator_lag": 0.05381363382159282, "transport_delay": 0.09639873809998827},
                  marks=pytest.mark.slow)])
 def test_a_lag_and_a_delay_are_named_together(tmp_path, condition, seed, magnitudes):
@@ -302,8 +302,7 @@ def _named_together(tmp_path, case, condition, seed, magnitudes, parameters, qui
 # seen runs of 30 s): the preload fitted alone took part of the offset (649 N) and the offset
 # fitted on top of it reached t = 2.8 (9.0 N*m): the preload alone was named until the second
 # step's close candidates were refitted together with the named cause (selection.
-# _backfitted_second: t = 7.0). With -m slow (about 3 min).
-@pytest.mark.slow
+# _backfitted_second: t = 7.0). In CI since stop 48 (65 s).
 def test_a_preload_and_an_offset_are_named_together_on_the_car(tmp_path):
     _named_together(tmp_path, "spring_preload+torque_offset", "car", 1,
                     {"spring_preload": 709.9367362342127, "torque_offset": 13.44862737078797},
