@@ -323,14 +323,12 @@ class FitMemo:
         self.max_bytes = FIT_MEMO_BYTES if max_bytes is None else int(max_bytes)
         self._fits: OrderedDict = OrderedDict()
         self._bytes = 0
-        self.hits = 0
 
     def get(self, key):
         hit = self._fits.get(key)
         if hit is None:
             return None
         self._fits.move_to_end(key)
-        self.hits += 1
         return hit[0]
 
     def put(self, key, fit) -> None:
