@@ -17,13 +17,12 @@ The cluster: clutch_model.identification.cluster (the one Monte Carlo uses): "lo
 """
 from __future__ import annotations
 
-import hashlib
 import math
 from dataclasses import replace
 
 import numpy as np
 
-from clutch_model.diagnosis.candidates import fit_job, refine_job, rows_digest
+from clutch_model.diagnosis.candidates import fit_job, model_digest, refine_job, rows_digest
 
 REFINE_TOP = 3          # select_causes' default refine_top: the refits worth submitting ahead
 
@@ -149,9 +148,7 @@ class FitExecutor:
         value, so a reused id() never matches an old entry), the named causes, the rows."""
         model = getattr(train.base, "model", None)
         try:
-            value = hashlib.sha1(np.asarray(model.vector(), float).tobytes()
-                                 + repr([(m.id, sorted(m.values.items())) for m in model.mechanisms]).encode()
-                                 ).hexdigest()
+            value = model_digest(model).hex()
         except Exception:             # not a ClutchModel: identity only
             value = ""
         return (id(train.base), value, tuple(train.selected), _digest(train.mask))

@@ -157,7 +157,7 @@ def _worker_warmup(threads=None):
     from clutch_model.plant.simulate import simulate_batch
     from clutch_model.threads import limit_blas_threads
 
-    limit_blas_threads()          # as the command line does: the same numbers as a serial run
+    limit_blas_threads()
     if threads:
         numba.set_num_threads(max(1, min(int(threads), numba.config.NUMBA_NUM_THREADS)))
     from clutch_model.plant.params import load_model
