@@ -50,7 +50,7 @@ from clutch_model.diagnosis.selection import (Selection, SelectionData, leaves_o
 from clutch_model.diagnosis.split import Split, choose_split
 from clutch_model.diagnosis import sample as S
 from clutch_model.diagnosis.sample import DEFAULT_BUDGET_S
-from clutch_model.diagnosis.structure_test import input_features
+from clutch_model.diagnosis.structure_test import input_features, within_fitted_range
 
 # Materiality of structure on car data: a named cause must cut the held-out one-step
 # innovation variance by NAMED_GAIN_FRAC; structure the inputs predict but no candidate
@@ -559,8 +559,16 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
     ids = list(candidates) if candidates else diagnosis_candidate_ids()
     data = SelectionData(y=campaign.torque_measured, t=campaign.t, run_start=campaign.run_start,
                          train_mask=fit_mask & scored, test_mask=eval_mask & scored, features=lib,
-                         feature_names=lib_names, groups=campaign.run_index)
+                         feature_names=lib_names, groups=campaign.run_index,
+                         fitted_range=within_fitted_range(
+                             {"force": campaign.force, "slip": np.abs(campaign.slip),
+                              "pack temperature": sim_cal.pack_temperature_c}, fit_mask & scored))
     data.per_run_feature_names, data.per_run_features = ripple_columns(campaign, calibrated.predicted)
+    outside = int((data.test_mask & ~data.fitted_range).sum())
+    inputs = {**inputs, "held_out_rows_outside_fitted_range": outside}
+    if outside:
+        say(f"{outside} of {int(data.test_mask.sum())} held-out rows lie outside the fitted rows' range of force, "
+            f"slip and pack temperature: the flexible residual model is not scored on them")
     base = baseline_fit(calibrated, cal_base, ctx, fit_mask & scored)
     cands = [MechanismCandidate(cid, ctx) for cid in ids]
     if fit_executor is not None:

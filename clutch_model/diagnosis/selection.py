@@ -64,6 +64,14 @@ class SelectionData:
     per_run_feature_names: list = field(default_factory=list)
     groups: np.ndarray | None = None      # jackknife groups of training rows (run index); None: blocks
     payload: object = None                # whatever the candidates need (the campaign, models, ...)
+    fitted_range: np.ndarray | None = None  # rows within the fitted rows' operating range
+    # (structure_test.within_fitted_range): the held-out rows the flexible residual model is tested on
+
+    @property
+    def interpolation_test_mask(self) -> np.ndarray:
+        """The held-out rows within the fitted rows' operating range (all of them without
+        ``fitted_range``)."""
+        return self.test_mask if self.fitted_range is None else self.test_mask & self.fitted_range
 
 
 @dataclass
@@ -285,11 +293,14 @@ def _remainder_test(data, resid, alpha, min_gain_frac, max_order):
     if data.features is None:
         return None
     tests = 3 if data.per_run_features is not None else 2
-    res = structure_test(resid, data.features, data.train_mask, data.test_mask, data.run_start, data.t,
+    # the flexible models are scored where they interpolate (within_fitted_range); the
+    # held-out excess, a calibration that extrapolates wrongly, on every held-out row
+    inside = data.interpolation_test_mask
+    res = structure_test(resid, data.features, data.train_mask, inside, data.run_start, data.t,
                          feature_names=data.feature_names, alpha=alpha / tests, min_gain_frac=min_gain_frac,
                          max_order=max_order)
     if data.per_run_features is not None:
-        per_run = per_run_structure_test(resid, data.per_run_features, data.train_mask, data.test_mask,
+        per_run = per_run_structure_test(resid, data.per_run_features, data.train_mask, inside,
                                          data.run_start, data.t, feature_names=data.per_run_feature_names,
                                          alpha=alpha / tests, min_gain_frac=min_gain_frac, max_order=max_order)
         if per_run.structured and not res.structured or per_run.comparison.t_stat > res.comparison.t_stat:

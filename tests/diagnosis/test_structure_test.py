@@ -344,3 +344,18 @@ def test_slow_drift_over_long_runs_is_not_structure(shape):
                                        min_gain_frac=0.01)
                 assert found.structured, (seed, found.comparison)
     assert not flagged, flagged
+
+
+def test_within_fitted_range_keeps_the_rows_between_the_training_extremes():
+    """A row is inside when every signal lies between its minimum and maximum over the finite
+    training rows; a non-finite value is outside, and a signal with no finite training row
+    constrains nothing."""
+    from clutch_model.diagnosis.structure_test import within_fitted_range
+
+    force = np.array([1.0, 5.0, 3.0, 9.0, 0.5, 4.0, np.nan])
+    temp = np.array([60.0, 80.0, 70.0, 75.0, 65.0, 95.0, 70.0])
+    unknown = np.full(force.size, np.nan)
+    train = np.array([True, True, False, False, False, False, False])
+    inside = within_fitted_range({"force": force, "pack temperature": temp, "unknown": unknown}, train)
+    assert inside.tolist() == [True, True, True, False, False, False, False]
+
