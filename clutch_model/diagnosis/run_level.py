@@ -192,6 +192,9 @@ class WithinRunForecast:
 
     comparison: PredictiveComparison     # null: the level alone; alternative: with the extension
     runs: int
+    residual_null: np.ndarray | None = None   # the second halves' errors, level alone (NaN elsewhere)
+    residual_alt: np.ndarray | None = None    # ... with the extension's change
+    rows: np.ndarray | None = None            # the second halves' rows
 
     def holds(self, alpha: float, min_gain_frac: float) -> bool:
         return self.runs > 0 and self.comparison.significant(alpha, min_gain_frac, plain_gain=True)
@@ -242,4 +245,5 @@ def within_run_forecast(measured: np.ndarray, residual_base: np.ndarray, residua
         first[a] = True
         second[b] = True
         runs += 1
-    return WithinRunForecast(compare_residuals(level0, level1, first, second, run_start, t), runs)
+    return WithinRunForecast(compare_residuals(level0, level1, first, second, run_start, t), runs,
+                             level0, level1, second)

@@ -144,3 +144,46 @@ def test_energy_term_holds_within_runs_only_when_the_friction_follows_the_energy
         w = within_run_forecast(measured, base, ext, rows, run_start, t)
         assert not w.holds(1e-3, 0.005), (seed, w.comparison)
         assert w.comparison.rmse_alt > w.comparison.rmse_null
+
+
+def test_a_degradation_named_alone_must_not_be_contradicted_within_the_runs():
+    """Three runs whose friction levels fall with the run order (+8 %, -4 %, -9 %) and are
+    constant within each run: an energy degradation fitted to them predicts a decline within
+    each run that is not there, and its second-half forecasts are worse in plain squares than
+    a level of the run, so it is not named (`unexplained`, the degradation the closest); on a
+    true degradation (the same decline, within the runs too) the name stands. Independent
+    truth: the measured torque is built from the levels or from the degradation itself."""
+    from dataclasses import dataclass as _dc
+    from types import SimpleNamespace
+
+    from clutch_model.diagnosis.engine import degradation_within_runs
+    from clutch_model.diagnosis.selection import Selection
+
+    @_dc
+    class Fixed:
+        prediction: np.ndarray
+
+        def predict(self, data):
+            return self.prediction
+
+    d = make_inputs(3, n_runs=3, duration_s=12.0, rate_hz=200.0)
+    torque, energy, run_start = d["torque"], d["energy"], d["run_start"]
+    run = np.cumsum(run_start) - 1
+    scale = energy[-1] / np.log(1.0 / 0.83)                   # 17 % over the campaign
+    decline = np.exp(-energy / scale)
+    level = np.array([1.08, 0.96, 0.91])[run]
+    noise = make_noise("white", run_start, SIGMA_NM, 7)
+    train, test = run != 1, run == 1
+    for truth, named_stays in ((torque * level, False), (torque * decline, True)):
+        y = truth + noise
+        # the degradation as fitted: the decline scaled to the data's mean level
+        fitted = torque * decline * (np.sum(y * torque * decline) / np.sum((torque * decline) ** 2))
+        data = SelectionData(y=y, t=d["t"], run_start=run_start, train_mask=train, test_mask=test)
+        sel = Selection("named", [SimpleNamespace(id="friction_degradation")], [], Fixed(fitted), None, None, [],
+                        {}, "named")
+        out = degradation_within_runs(data, sel, Fixed(torque), lambda msg: None)
+        if named_stays:
+            assert out is sel
+        else:
+            assert out.verdict == "unexplained" and out.closest == ["friction_degradation"], out.reason
+            assert out.causes == [] and "worse than a level of the run" in out.reason

@@ -275,6 +275,42 @@ def test_one_held_out_run_outside_the_training_runs_spread_is_structure(kind):
     assert found >= {"white": 6, "white_drift": 0}.get(kind, 4), (kind, found)
 
 
+@pytest.mark.parametrize("kind", NOISE_CLASSES)
+def test_one_held_out_run_many_times_worse_than_two_fitted_runs_is_structure(kind):
+    """Three runs, the middle one held out: the fitted runs' spread has one degree of freedom,
+    and a held-out run four noise sds off (a friction level of its own that a degradation
+    fitted to the other two runs gets wrong) passed for noise (t on 1 dof). Its mean square is
+    now also set against what the noise model fitted to the training residual allows for a
+    run of its length; pure noise stays noise under every class."""
+    found = 0
+    for seed in range(6):
+        d = make_inputs(seed, n_runs=3, duration_s=10.0, rate_hz=200.0)
+        run_start = d["run_start"]
+        test = np.cumsum(run_start) - 1 == 1
+        one_series = np.zeros_like(run_start)
+        one_series[0] = True
+        noise = make_noise(kind, one_series, SIGMA_NM, 3000 + seed)
+        null = held_out_excess_test(noise, ~test, test, run_start, d["t"], alpha=ALPHA / 3)
+        assert not null.structured, (kind, seed, null.comparison)
+        level = np.where(test, 4.0 * SIGMA_NM, 0.0)
+        res = held_out_excess_test(noise + level, ~test, test, run_start, d["t"], alpha=ALPHA / 3)
+        found += res.structured
+    assert found >= {"white_drift": 3}.get(kind, 6), (kind, found)
+
+
+def test_mean_square_variance_of_an_ar1_series_matches_simulation():
+    """The variance of a stretch's mean square from the noise model (the AR autocovariance)
+    against the scatter of simulated AR(1) stretches."""
+    from clutch_model.diagnosis.structure_test import mean_square_variance
+
+    rng = np.random.default_rng(5)
+    x = lfilter([1.0], [1.0, -0.9], rng.normal(size=400_000))
+    nm = fit_noise_model(x, max_order=4)
+    n = 400
+    ms = np.mean(x[: (x.size // n) * n].reshape(-1, n) ** 2, axis=1)
+    assert mean_square_variance(nm, n) == pytest.approx(float(np.var(ms)), rel=0.15)
+
+
 def test_white_floor_is_the_ar_approximation_of_the_spectrum_plus_white_noise():
     """An AR(1) 0.95 noise model floored with white noise: its innovation variance is the
     optimal one-step error of the spectrum S_AR + floor (Kolmogorov-Szego: exp of the mean log
