@@ -344,25 +344,6 @@ class Search:
     refit: Callable = field(repr=False, default=None)   # refit(terms) -> fit dict
 
 
-CONSTANT_SHARE = 0.95   # a torque term whose fitted-row values are this close to a constant is an offset
-
-
-def restates_torque_offset(library, columns: np.ndarray) -> np.ndarray:
-    """Per library term: an additive torque term whose regressor on the fitted rows is a
-    constant (its mean square at least CONSTANT_SHARE of it in the mean's square), which on
-    these rows is the catalog's torque_offset. The slip's direction is one where the slip
-    never changes sign while slipping: on an independent campaign (one 106 s drive, slip ≥ 0,
-    AR(1) noise, a −15.4 N·m offset hidden) "the torque gains −17.3 N·m of slip direction" was
-    named `discovered` for the catalog's offset, and beside a named offset (six short runs)
-    it could not be told from it (`unexplained`). A catalog mechanism the data cannot tell an
-    extension from keeps its name."""
-    cols = np.asarray(columns, float)
-    ms = np.mean(cols * cols, axis=0)
-    mean = np.mean(cols, axis=0)
-    share = np.divide(mean * mean, ms, out=np.zeros_like(ms), where=ms > 0)
-    return np.array([t.kind == "torque" and share[j] >= CONSTANT_SHARE for j, t in enumerate(library)])
-
-
 def search(campaign, model: ClutchModel, fit_mask, noise_model=None, *, library=None, valid_mask=None,
            max_terms: int = MAX_TERMS, friction_anchor: ClutchModel | None = None, progress=None) -> Search:
     """Steps 1-4 of the module docstring on the training rows ``fit_mask`` only: the sparse
@@ -392,7 +373,6 @@ def search(campaign, model: ClutchModel, fit_mask, noise_model=None, *, library=
     y_perp = y - zq @ (zq.T @ y)
     norms = np.sqrt(np.mean(x_perp ** 2, axis=0))
     usable = norms > 1e-9 * max(float(np.sqrt(np.mean(y ** 2))), 1e-12)
-    usable &= ~restates_torque_offset(library, cols)
     xs = np.where(usable[None, :], x_perp / np.where(usable, norms, 1.0)[None, :], 0.0)
     groups = _groups(campaign, fit_rows)
 

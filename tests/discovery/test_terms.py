@@ -120,16 +120,3 @@ def test_an_unresolved_time_constant_has_the_interval_zero_to_infinity():
     lo, hi = tau_interval_s(0.08, 0.5)
     assert lo == pytest.approx(0.08 * math.exp(-0.5)) and hi == pytest.approx(0.08 * math.exp(0.5))
 
-
-def test_a_torque_term_constant_on_the_fitted_rows_restates_the_offset():
-    """The slip's direction is a constant where the slip never changes sign: the term is the
-    catalog's torque_offset there and discovery does not offer it; where the slip changes sign
-    it is a term of its own, and friction (mu) terms are never an offset."""
-    from clutch_model.discovery.identify import restates_torque_offset
-
-    library = [Term("torque", "slip_sign"), Term("torque", "slip"), Term("mu", "slip_power")]
-    one_way = np.column_stack([np.ones(1000), np.linspace(2.0, 9.0, 1000), np.ones(1000)])
-    both_ways = np.column_stack([np.sign(np.sin(np.linspace(0, 20, 1000))), np.linspace(2.0, 9.0, 1000),
-                                 np.ones(1000)])
-    assert restates_torque_offset(library, one_way).tolist() == [True, False, False]
-    assert restates_torque_offset(library, both_ways).tolist() == [False, False, False]
