@@ -113,6 +113,10 @@ class NoiseModel:
             h.append(val)
         return out
 
+    def autocovariance(self, lags: int) -> np.ndarray:
+        """Autocovariance of the fitted process at lags 0..lags."""
+        return _autocovariance(self.lattice, self.order_variance, lags)
+
     def forecast_variance(self, steps: int) -> np.ndarray:
         """Variance of the h-step prediction error, h = 1..steps (psi-weights of the AR)."""
         psi = lfilter([1.0], self.a, np.r_[1.0, np.zeros(steps - 1)])

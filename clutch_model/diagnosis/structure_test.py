@@ -33,8 +33,7 @@ import numpy as np
 from scipy import stats
 from scipy.signal import butter, filtfilt, lfilter
 
-from clutch_model.diagnosis.noise_model import (DEFAULT_MAX_ORDER, NoiseModel, _autocovariance, fit_noise_model,
-                                                segments_of)
+from clutch_model.diagnosis.noise_model import DEFAULT_MAX_ORDER, NoiseModel, fit_noise_model, segments_of
 
 BLOCK_S = 1.0
 MIN_BLOCK_ROWS = 20
@@ -812,13 +811,15 @@ MIN_EXCESS = 0.12       # held-out innovation variance above the training one, m
 GROSS_EXCESS = 2.0      # a held-out mean square this far above the fitted rows' is tested against the noise model too
 
 
-def mean_square_variance(nm: NoiseModel, n: int, variance: float | None = None) -> float:
+def mean_square_variance(nm: NoiseModel, n: int, variance: float | None = None,
+                         autocovariance: np.ndarray | None = None) -> float:
     """Variance of the mean of x^2 over n consecutive rows of the Gaussian AR process ``nm``
-    (scaled to ``variance`` when given): (2/n) [g0^2 + 2 sum_k (1 - k/n) g_k^2]."""
+    (scaled to ``variance`` when given): (2/n) [g0^2 + 2 sum_k (1 - k/n) g_k^2].
+    ``autocovariance``: nm's autocovariance at lags 0..n-1 or more, when already at hand."""
     n = int(n)
     if n <= 0:
         return math.inf
-    g = _autocovariance(nm.lattice, nm.order_variance, n - 1)
+    g = nm.autocovariance(n - 1) if autocovariance is None or autocovariance.size < n else autocovariance[:n]
     if variance is not None and g[0] > 0:
         g = g * (variance / g[0])
     k = np.arange(1, n)
@@ -894,14 +895,15 @@ def _excess_against_noise_model(z2, trows, rows, nm: NoiseModel, run_start) -> t
     the variance of each contiguous stretch's mean square from the noise model
     (mean_square_variance, scaled to the training mean square)."""
     ms_a = float(np.mean(z2[trows]))
+    lengths = {which: [b - a for a, b in segments_of(np.where(mask, 0.0, np.nan), run_start)]
+               for which, mask in (("held-out", rows), ("fitted", trows))}
+    g = nm.autocovariance(max(max(v, default=1) for v in lengths.values()) - 1)   # once, for the longest
 
-    def spread(mask):
-        lengths = [b - a for a, b in segments_of(np.where(mask, 0.0, np.nan), run_start)]
-        n = float(sum(lengths))
-        return n, sum(m * m * mean_square_variance(nm, m, ms_a) for m in lengths) / (n * n)
+    def spread(stretches):
+        n = float(sum(stretches))
+        return sum(m * m * mean_square_variance(nm, m, ms_a, g) for m in stretches) / (n * n)
 
-    n_b, var_b = spread(rows)
-    _, var_a = spread(trows)
+    var_b, var_a = spread(lengths["held-out"]), spread(lengths["fitted"])
     se = math.sqrt(var_a + var_b)
     z = (float(np.mean(z2[rows])) - ms_a) / se if se > 0 else 0.0
     return z, float(stats.norm.sf(z))
