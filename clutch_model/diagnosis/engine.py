@@ -564,7 +564,7 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
                              {"force": campaign.force, "slip": np.abs(campaign.slip),
                               "pack temperature": sim_cal.pack_temperature_c}, fit_mask & scored))
     data.per_run_feature_names, data.per_run_features = ripple_columns(campaign, calibrated.predicted)
-    outside = int((data.test_mask & ~data.fitted_range).sum())
+    outside = int(data.test_mask.sum() - data.interpolation_test_mask.sum())
     inputs = {**inputs, "held_out_rows_outside_fitted_range": outside}
     if outside:
         say(f"{outside} of {int(data.test_mask.sum())} held-out rows lie outside the fitted rows' range of force, "
@@ -976,7 +976,8 @@ def degradation_within_runs(data: SelectionData, sel: Selection, base, say) -> S
     if sel.verdict != "named" or sel.cause_ids != ["friction_degradation"]:
         return sel
     rows = np.asarray(data.train_mask, bool) | np.asarray(data.test_mask, bool)
-    w = within_run_forecast(data.y, residual(data, base), residual(data, sel.final), rows, data.run_start, data.t)
+    resid_named = residual(data, sel.final)
+    w = within_run_forecast(data.y, residual(data, base), resid_named, rows, data.run_start, data.t)
     if w.runs == 0:
         return sel
     worse = plain_worse_test(w.residual_null, w.residual_alt, w.rows, data.run_start, data.t)
@@ -990,7 +991,7 @@ def degradation_within_runs(data: SelectionData, sel: Selection, base, say) -> S
            f"friction level that differs from run to run")
     say(f"not named: {why}")
     return replace(sel, verdict="unexplained", causes=[], final=base, closest=["friction_degradation"],
-                   closest_leaves=leaves_of(data, residual(data, sel.final), None), reason=why)
+                   closest_leaves=leaves_of(data, resid_named, None), reason=why)
 
 
 def energy_not_within_runs(data: SelectionData, base, extension, terms) -> str:

@@ -895,15 +895,14 @@ def _excess_against_noise_model(z2, trows, rows, nm: NoiseModel, run_start) -> t
     the variance of each contiguous stretch's mean square from the noise model
     (mean_square_variance, scaled to the training mean square)."""
     ms_a = float(np.mean(z2[trows]))
-    lengths = {which: [b - a for a, b in segments_of(np.where(mask, 0.0, np.nan), run_start)]
-               for which, mask in (("held-out", rows), ("fitted", trows))}
-    g = nm.autocovariance(max(max(v, default=1) for v in lengths.values()) - 1)   # once, for the longest
+    held, fitted = ([b - a for a, b in segments_of(np.where(mask, 0.0, np.nan), run_start)] for mask in (rows, trows))
+    g = nm.autocovariance(max(held + fitted) - 1)     # once, for the longest stretch
 
     def spread(stretches):
         n = float(sum(stretches))
         return sum(m * m * mean_square_variance(nm, m, ms_a, g) for m in stretches) / (n * n)
 
-    var_b, var_a = spread(lengths["held-out"]), spread(lengths["fitted"])
+    var_b, var_a = spread(held), spread(fitted)
     se = math.sqrt(var_a + var_b)
     z = (float(np.mean(z2[rows])) - ms_a) / se if se > 0 else 0.0
     return z, float(stats.norm.sf(z))

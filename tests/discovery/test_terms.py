@@ -119,4 +119,3 @@ def test_an_unresolved_time_constant_has_the_interval_zero_to_infinity():
     assert tau_interval_s(0.08, 1e3) == [0.0, math.inf]
     lo, hi = tau_interval_s(0.08, 0.5)
     assert lo == pytest.approx(0.08 * math.exp(-0.5)) and hi == pytest.approx(0.08 * math.exp(0.5))
-
