@@ -270,30 +270,53 @@ class ModelFit:
     def predict(self, data: SelectionData = None) -> np.ndarray:
         return self.fit.predicted
 
-    def sensitivity(self):
-        """d(prediction)/dx at the fit, x = the mechanism's parameters in their search transform
-        (then the friction correction, if it was refitted): forward differences, one batch."""
-        if self.id == "baseline":
-            return None
+    def _objective_at_fit(self):
+        """(CampaignObjective, x at the fit, mechanism search spaces) of this fit, on its training
+        rows: x = the mechanism's parameters in their search transform, then the co-fitted
+        mechanisms' (fitting.co_fitted_ids, as fitted), then the friction correction if it was
+        refitted."""
         ctx = self.context
-        specs = search_space(self.id, ctx.campaign, ctx.energy_total_j, ctx.torque_scale)
-        # the co-fitted mechanisms (fitting.co_fitted_ids) as fitted, their parameters nuisance columns
+        mech_id = None if self.id == "baseline" else self.id
+        specs = search_space(mech_id, ctx.campaign, ctx.energy_total_j, ctx.torque_scale) if mech_id else []
         co = self.fit.co_parameters
         co_specs = [(cid, search_space(cid, ctx.campaign, ctx.energy_total_j, ctx.torque_scale)) for cid in co]
         base = self.base_model.with_mechanisms(self.fit.model.mechanisms) if co else self.base_model
-        obj = CampaignObjective(base, ctx.campaign, self.mask, self.id, specs, fit_friction=self.fit.joint,
+        obj = CampaignObjective(base, ctx.campaign, self.mask, mech_id, specs, fit_friction=self.fit.joint,
                                 noise_sigma_nm=ctx.sigma_nm, co_specs=co_specs,
                                 ridge_factor=ctx.friction_ridge_factor)
         x = np.array([s.to_x(self.fit.parameters[s.name]) for s in specs]
                      + [s.to_x(co[cid][s.name]) for cid, cs in co_specs for s in cs]
-                     + (list(self.fit.friction_correction) if self.fit.joint else []), float)
+                     + (list(self.fit.friction_correction) if obj.fit_friction else []), float)
+        return obj, x, specs
+
+    def _jacobian(self, obj: CampaignObjective, x: np.ndarray) -> np.ndarray:
+        """d(prediction)/dx at x over every row of the campaign: forward differences, one batch."""
         steps = np.where(np.arange(x.size) < obj.n_mech, 1e-3 * np.maximum(np.abs(x), 1.0), 1e-4)
         lo, hi = obj.bounds()
         steps = np.where(x + steps > hi, -steps, steps)
-        xs = np.vstack([x, x[None, :] + np.diag(steps)])
-        preds = obj.predict(xs)
-        jac = ((preds[1:] - preds[0][None, :]) / steps[:, None]).T
-        return ParameterSensitivity([s.name for s in specs], x, jac, [s.from_x for s in specs], estimator="ols")
+        preds = obj.predict(np.vstack([x, x[None, :] + np.diag(steps)]))
+        return ((preds[1:] - preds[0][None, :]) / steps[:, None]).T
+
+    def sensitivity(self):
+        """d(prediction)/dx at the fit, x = the mechanism's parameters in their search transform
+        (then the co-fitted mechanisms' and the friction correction, if it was refitted, as
+        nuisance columns)."""
+        if self.id == "baseline":
+            return None
+        obj, x, specs = self._objective_at_fit()
+        return ParameterSensitivity([s.name for s in specs], x, self._jacobian(obj, x), [s.from_x for s in specs],
+                                    estimator="ols")
+
+    def flexibility(self):
+        """What this fit could absorb of the rows it was fitted on: its Jacobian over every
+        parameter fitted there (the baseline's too: its friction correction) and the ridge's
+        penalty per column (structure_test.cross_fitted_residual); None when nothing was fitted."""
+        obj, x, specs = self._objective_at_fit()
+        if x.size == 0:
+            return None
+        penalty = np.where(np.arange(x.size) >= obj.n_mech, obj.ridge ** 2, 0.0)
+        return ParameterSensitivity([s.name for s in specs], x, self._jacobian(obj, x), [s.from_x for s in specs],
+                                    estimator="ols", penalty=penalty)
 
 
 def baseline_fit(calibrated: CandidateFit, base_model, context: CampaignContext, mask) -> ModelFit:

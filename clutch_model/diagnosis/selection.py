@@ -37,7 +37,7 @@ import numpy as np
 from clutch_model.diagnosis.noise_model import DEFAULT_MAX_ORDER, segments_of
 from clutch_model.diagnosis.structure_test import (ALPHA, BLOCK_S, MIN_GAIN_FRAC, PredictiveComparison,
                                                    StructureResult, block_labels, compare_residuals,
-                                                   held_out_excess_test, per_run_structure_test,
+                                                   cross_fitted_residual, held_out_excess_test, per_run_structure_test,
                                                    EncompassingTest, PlainCrossFit, encompassing_test,
                                                    plain_cross_fit_test, structure_test)
 from clutch_model.diagnosis.run_level import RunLevelResult, run_level_tests
@@ -113,6 +113,7 @@ class ParameterSensitivity:
     jacobian: np.ndarray            # rows x len(x)
     from_x: Sequence[Callable]      # per named parameter: x -> physical value
     estimator: str = "ols"          # how x was fitted: "ols" (plain least squares) or "gls" (AR-whitened)
+    penalty: np.ndarray | None = None   # the fit's ridge per column of x (its squared weight), if any
 
 
 @dataclass
@@ -287,9 +288,11 @@ def _compare(data, resid_null, resid_alt, max_order):
                              max_order=max_order)
 
 
-def _remainder_test(data, resid, alpha, min_gain_frac, max_order):
+def _remainder_test(data, resid, alpha, min_gain_frac, max_order, fitted=None):
     """The flexible residual model, and the per-run one when there are per-run columns (each
-    at alpha / 2); the more significant result is returned."""
+    at alpha / 2); the more significant result is returned. Else the held-out excess: found
+    there, it is tested again with the fitted rows' residual cross-fitted (each training
+    stretch as if left out of ``fitted``'s fit, when it gives its ``flexibility``)."""
     if data.features is None:
         return None
     tests = 3 if data.per_run_features is not None else 2
@@ -310,6 +313,14 @@ def _remainder_test(data, resid, alpha, min_gain_frac, max_order):
         # structure the training rows do not show: the held-out rows' noise is larger
         excess = held_out_excess_test(resid, data.train_mask, data.test_mask, data.run_start, data.t,
                                       alpha=alpha / tests, max_order=max_order)
+        flex = fitted.flexibility() if excess.structured and hasattr(fitted, "flexibility") else None
+        if flex is not None:
+            # the fitted rows' in-sample residual is optimistic where the fit followed their
+            # noise (cross_fitted_residual): the held-out rows are set against what the fit
+            # would leave on rows it had not seen
+            crossed = cross_fitted_residual(resid, flex.jacobian, flex.penalty, data.train_mask, data.run_start)
+            excess = held_out_excess_test(crossed, data.train_mask, data.test_mask, data.run_start, data.t,
+                                          alpha=alpha / tests, max_order=max_order)
         if excess.structured:
             res = excess
     return res
@@ -1206,7 +1217,7 @@ def select_causes(data: SelectionData, baseline, candidates: Sequence, alpha: fl
     current = baseline
     resid_cur = residual(data, current)
     say("structure test of the baseline residual")
-    base_struct = _remainder_test(data, resid_cur, alpha, structure_min_gain_frac, max_order)
+    base_struct = _remainder_test(data, resid_cur, alpha, structure_min_gain_frac, max_order, current)
     run_level = run_level_tests(resid_cur, data.y - resid_cur, data.train_mask | data.test_mask, data.run_start,
                                 data.t)
     remaining = list(candidates)
@@ -1310,7 +1321,8 @@ def select_causes(data: SelectionData, baseline, candidates: Sequence, alpha: fl
             resid_cur = residual(data, current)
 
     say("structure test of what remains")
-    rem_struct = _remainder_test(data, resid_cur, alpha, structure_min_gain_frac, max_order) if named else base_struct
+    rem_struct = (_remainder_test(data, resid_cur, alpha, structure_min_gain_frac, max_order, current) if named
+                  else base_struct)
     structured_left = bool(rem_struct is not None and rem_struct.structured)
     named_ids = {c.id for c in named}
     unresolved = sorted({lk for s in steps for lk in s.lookalikes if lk not in named_ids})
