@@ -395,3 +395,63 @@ def test_within_fitted_range_keeps_the_rows_between_the_training_extremes():
     inside = within_fitted_range({"force": force, "pack temperature": temp, "unknown": unknown}, train)
     assert inside.tolist() == [True, True, True, False, False, False, False]
 
+
+
+def test_cross_fitted_residual_is_the_exact_leave_one_run_out_residual_of_a_linear_fit():
+    """For a linear least-squares fit (ridge or not) the linearised leave-one-stretch-out is
+    exact: each training run's cross-fitted residual equals the residual of the same fit made
+    without that run; held-out rows are left as they are."""
+    from clutch_model.diagnosis.structure_test import cross_fitted_residual
+
+    rng = np.random.default_rng(11)
+    d = make_inputs(3, n_runs=5, duration_s=4.0, rate_hz=100.0)
+    run_start, run = d["run_start"], np.cumsum(d["run_start"]) - 1
+    J = np.column_stack([np.ones(run.size), d["force"] / 4000.0, d["pack_temperature"] / 100.0, np.sin(d["angle"])])
+    y = J @ np.array([1.0, -2.0, 0.5, 3.0]) + rng.normal(0.0, 1.0, run.size)
+    train = run != 2
+    for penalty in (None, np.array([0.0, 40.0, 40.0, 0.0])):
+        P = np.zeros((4, 4)) if penalty is None else np.diag(penalty)
+
+        def fit(rows):
+            return np.linalg.solve(J[rows].T @ J[rows] + P, J[rows].T @ y[rows])
+
+        r = y - J @ fit(train)
+        crossed = cross_fitted_residual(r, J, penalty, train, run_start)
+        for k in (0, 1, 3, 4):
+            left_out = run == k
+            expected = y[left_out] - J[left_out] @ fit(train & ~left_out)
+            np.testing.assert_allclose(crossed[left_out], expected, rtol=1e-9, atol=1e-9)
+        np.testing.assert_array_equal(crossed[run == 2], r[run == 2])
+
+
+def test_held_out_excess_is_set_against_what_the_fit_leaves_on_runs_it_did_not_see():
+    """Six short runs under slow drift (a 5 s random walk, three quarters of the sd), two
+    held out, a six-column fit on the other four: in sample the fit follows the fitted runs'
+    drift, and their residual, below the noise's own, makes the held-out runs look like
+    structure; cross-fitted (each fitted run as if left out) it never does. A held-out run
+    with a level of its own, four noise sds, is still found once the fit is cross-fitted."""
+    from clutch_model.diagnosis.structure_test import cross_fitted_residual
+
+    in_sample = crossed_fired = found = 0
+    for seed in range(16):
+        d = make_inputs(seed, n_runs=6, duration_s=8.0, rate_hz=200.0)
+        run_start, run = d["run_start"], np.cumsum(d["run_start"]) - 1
+        test = (run == 3) | (run == 5)
+        f = d["force"] / np.mean(d["force"])
+        w = np.abs(d["slip"]) / np.mean(np.abs(d["slip"]))
+        J = np.column_stack([np.ones_like(f), f, f * f, w, w * w, f * w])
+
+        def excess(y, cross):
+            r = y - J @ np.linalg.lstsq(J[~test], y[~test], rcond=None)[0]
+            if cross:
+                r = cross_fitted_residual(r, J, None, ~test, run_start)
+            return held_out_excess_test(r, ~test, test, run_start, d["t"], alpha=ALPHA / 3).structured
+
+        drift = ou_drift_noise(run_start, SIGMA_NM, 500 + seed, tau_s=5.0, drift_share=0.75)
+        in_sample += excess(drift, cross=False)
+        crossed_fired += excess(drift, cross=True)
+        white = np.random.default_rng(900 + seed).normal(0.0, SIGMA_NM, run.size)
+        found += excess(white + np.where(run == 5, 4.0 * SIGMA_NM, 0.0), cross=True)
+    assert in_sample >= 2, in_sample
+    assert crossed_fired == 0, crossed_fired
+    assert found == 16, found
