@@ -67,7 +67,7 @@ def against_first(data, first, second, alpha: float, min_gain_frac: float) -> tu
     """(the second selection's final model predicts the held-out residual significantly better
     than the first's, the comparison for the report)."""
     head = _compare(data, residual(data, first.final), residual(data, second.final), DEFAULT_MAX_ORDER)
-    ok = head.significant(alpha, min_gain_frac, plain_gain=True, noise_units=True)
+    ok = head.significant(alpha, min_gain_frac, plain_gain=True, noise_units=True, plain_material=True)
     return ok, {"held_out_t": float(head.t_stat), "innovation_variance_cut": float(head.gain_frac),
                 "held_out_rmse": float(head.rmse_alt), "first_held_out_rmse": float(head.rmse_null)}
 

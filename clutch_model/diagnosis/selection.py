@@ -811,7 +811,8 @@ def _nameable(data: SelectionData, s: CandidateScore, alpha: float, min_gain_fra
     """A scored candidate may take a name at ``alpha``: it predicts the held-out residual
     better than the model so far (significant, material), its parameters are resolved by the
     data, and its mechanism beats its twin (``_own_contribution``, computed once per score)."""
-    if not s.comparison.significant(alpha, min_gain_frac, plain_gain) or _below_resolution(s.fitted):
+    if (not s.comparison.significant(alpha, min_gain_frac, plain_gain, plain_material=True)
+            or _below_resolution(s.fitted)):
         return False
     if s.own is None:
         s.own, s.own_pieces = _own_contribution(data, s.fitted, max_order)
@@ -819,7 +820,7 @@ def _nameable(data: SelectionData, s: CandidateScore, alpha: float, min_gain_fra
     # whitened one-step errors alone is the high-frequency part (under AR(1) 0.9 noise a
     # deadband on the force noise: car / none / 44, t = 4.2, innovation variance -2.2 %,
     # plain held-out mean square -0.03 %)
-    return s.own is False or (s.own.significant(alpha, min_gain_frac, plain_gain, noise_units=True)
+    return s.own is False or (s.own.significant(alpha, min_gain_frac, plain_gain, noise_units=True, plain_material=True)
                               and holds_on_most_pieces(s.own_pieces))
 
 
@@ -869,7 +870,7 @@ class _Stepper:
         ``alpha``, default the selection's, and material) with its time parameters resolved by
         the rows."""
         return (s.comparison.significant(self.alpha if alpha is None else alpha, self.min_gain_frac,
-                                         self.plain_gain)
+                                         self.plain_gain, plain_material=True)
                 and not _below_resolution(s.fitted))
 
     def nameable(self, s: CandidateScore, alpha: float | None = None) -> bool:
