@@ -300,12 +300,8 @@ class ModelFit:
     def sensitivity(self):
         """d(prediction)/dx at the fit, x = the mechanism's parameters in their search transform
         (then the co-fitted mechanisms' and the friction correction, if it was refitted, as
-        nuisance columns)."""
-        if self.id == "baseline":
-            return None
-        obj, x, specs = self._objective_at_fit()
-        return ParameterSensitivity([s.name for s in specs], x, self._jacobian(obj, x), [s.from_x for s in specs],
-                                    estimator="ols")
+        nuisance columns): ``flexibility`` of a fitted mechanism."""
+        return None if self.id == "baseline" else self.flexibility()
 
     def flexibility(self):
         """What this fit could absorb of the rows it was fitted on: its Jacobian over every

@@ -911,11 +911,12 @@ def cross_fitted_residual(residual: np.ndarray, jacobian: np.ndarray, penalty, t
     named offset, where the true model leaves t = 1.6)."""
     r = np.asarray(residual, float)
     J = np.asarray(jacobian, float)
-    ok = np.asarray(train_mask, bool) & np.isfinite(r) & np.all(np.isfinite(J), axis=1)
+    train = np.asarray(train_mask, bool)
+    ok = train & np.isfinite(r) & np.all(np.isfinite(J), axis=1)
     pen = np.zeros(J.shape[1]) if penalty is None else np.asarray(penalty, float)
     A = J[ok].T @ J[ok] + np.diag(pen)
     out = r.copy()
-    for a, b in segments_of(np.where(np.asarray(train_mask, bool), 0.0, np.nan), run_start):
+    for a, b in segments_of(np.where(train, 0.0, np.nan), run_start):
         rows = a + np.flatnonzero(ok[a:b])
         if rows.size == 0:
             continue

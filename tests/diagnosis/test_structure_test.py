@@ -8,9 +8,9 @@ from scipy.signal import lfilter
 
 from clutch_model.diagnosis.noise_model import fit_noise_model, segments_of
 from clutch_model.diagnosis.structure_test import (ALPHA, BLOCK_S, MIN_BLOCK_S, MIN_GAIN_FRAC, MIN_PLAIN_CUT,
-                                                   block_labels,
-                                                   candidate_test, held_out_excess_test, input_features, per_run_structure_test, plain_cross_fit_test,
-                                                   score_block_s, structure_test)
+                                                   block_labels, candidate_test, held_out_excess_test, input_features,
+                                                   per_run_structure_test, plain_cross_fit_test, score_block_s,
+                                                   structure_test)
 
 from .synthetic_residuals import (NOISE_CLASSES, feature_signals, make_inputs, make_noise, ou_drift_noise, split_every_third,
                                   split_spans)
@@ -395,7 +395,6 @@ def test_within_fitted_range_keeps_the_rows_between_the_training_extremes():
     train = np.array([True, True, False, False, False, False, False])
     inside = within_fitted_range({"force": force, "pack temperature": temp, "unknown": unknown}, train)
     assert inside.tolist() == [True, True, True, False, False, False, False]
-
 
 
 def test_cross_fitted_residual_is_the_exact_leave_one_run_out_residual_of_a_linear_fit():
