@@ -48,6 +48,11 @@ Effects outside the catalog (``effects``: [{"name": ..., parameter: value}]):
                                      ratio): a hydraulic / motor-and-gear actuator with inertia;
                                      mimics transport_delay and actuator_lag (group delay
                                      2·damping/(2π·f_n)); a force-path effect like the rate limit
+  actuator_backlash      half_width_n  the pack force follows the measured force through a play
+                                     of constant half-width w: it moves only when the request
+                                     leaves [x − w, x + w] (gear or linkage backlash); mimics
+                                     actuator_hysteresis, whose band F(1 ± ratio) grows with the
+                                     force (a force-path effect)
 Plant effects (the last three) run in ``_trajectory_friction_factor``, the kernels' own step
 functions with the friction factor written through the degradation slot each row (so the
 factor heats the pack like any friction); measurement effects post-process the fine grid.
@@ -103,6 +108,10 @@ EFFECTS = {
                               "physics": "the pack force follows the measured force through a "
                                          "second-order response (natural frequency f_n_hz, damping "
                                          "ratio): an actuator with inertia"},
+    "actuator_backlash": {"kind": "force-path", "parameters": {"half_width_n": 300.0},
+                          "mimics": "actuator_hysteresis", "catalog_equivalent": None,
+                          "physics": "the pack force follows the measured force through a play of "
+                                     "constant half-width half_width_n (gear or linkage backlash)"},
 }
 
 DEFAULT_CLOCKS = {
@@ -459,6 +468,19 @@ def _slew_limited(force, run_start, step_n):
     return out
 
 
+@njit(cache=True)
+def _played(force, run_start, half_width_n):
+    """The force each fine row reaches through a play of constant half-width: it moves only
+    when the request leaves [x - w, x + w] (restarted at the request at each run's start)."""
+    out = np.empty_like(force)
+    for k in range(force.size):
+        if k == 0 or run_start[k]:
+            out[k] = force[k]
+        else:
+            out[k] = min(max(out[k - 1], force[k] - half_width_n), force[k] + half_width_n)
+    return out
+
+
 def _second_order_per_run(force, run_start, f_n_hz, damping, dt_s):
     """The force each fine row reaches through a unit-gain second-order response (natural
     frequency ``f_n_hz``, damping ratio ``damping``; exact zero-order-hold discretisation),
@@ -533,6 +555,9 @@ def synthesize_car_logs(spec: CarLogSpec | None = None, base_model: ClutchModel 
     if second is not None:
         force_pack = _second_order_per_run(force_pack, run_start, float(second["f_n_hz"]),
                                            float(second["damping"]), 1.0 / spec.fine_rate_hz)
+    backlash = spec.effect_values("actuator_backlash")
+    if backlash is not None:
+        force_pack = _played(force_pack, run_start, float(backlash["half_width_n"]))
     plant, eff_info = _simulate_plant(true_model, spec, t_abs, force_pack, slip_all, sump_all, run_start, rng_eff)
     # the driveline sets the transmitted torque while locked (below the static capacity)
     locked = plant["locked"] & np.isfinite(load_all)

@@ -265,6 +265,32 @@ def test_actuator_second_order_drives_the_plant_with_the_filtered_force():
     assert on.spec.expected_cause == "unexplained"
 
 
+def test_actuator_backlash_drives_the_plant_through_a_play_of_constant_width():
+    """actuator_backlash: the plant sees the request through a play of constant half-width w
+    (the pack force moves only when the request leaves [x - w, x + w]), the force sensor reads
+    the request. The reference play is computed here row by row; the played force never
+    strays more than w from the request, and reaches it again after every reversal larger
+    than 2 w. Unlike the catalog's hysteresis band F(1 +- ratio), the play's width does not
+    grow with the force."""
+    from clutch_model.virtual_car.car_logs import CarLogSpec, synthesize_car_logs
+    w = 250.0
+    base = synthesize_car_logs(CarLogSpec(seed=2, n_runs=1))
+    on = synthesize_car_logs(CarLogSpec(seed=2, n_runs=1, effects=[{"name": "actuator_backlash", "half_width_n": w}]))
+    fb, fo = base.runs[0].fine, on.runs[0].fine
+    np.testing.assert_array_equal(fo["applied_force_n"], fb["applied_force_n"])
+    request = fb["applied_force_n"]
+    pack = np.empty_like(request)
+    pack[0] = request[0]
+    for k in range(1, request.size):
+        pack[k] = min(max(pack[k - 1], request[k] - w), request[k] + w)
+    assert np.max(np.abs(pack - request)) <= w + 1e-9
+    assert np.mean(np.abs(pack - request) > 0.5 * w) > 0.1     # the play is engaged much of the drive
+    _assert_plant_driven_by(pack, on, base, rtol=1e-9, atol=1e-6, min_change_rms_nm=5.0)
+    truth = on.truth["effects"][0]
+    assert truth["name"] == "actuator_backlash" and truth["parameters"] == {"half_width_n": w}
+    assert truth["mimics"] == "actuator_hysteresis" and on.spec.expected_cause == "unexplained"
+
+
 def test_cli_car_logs(tmp_path):
     from clutch_sim.cli import main
     out = tmp_path / "c"
