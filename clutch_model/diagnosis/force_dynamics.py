@@ -170,10 +170,10 @@ def _fit_from_best_start(obj: ForcePathObjective, starts, max_nfev: int, fit_id:
 
 
 def _named_refitted(sel, base: ClutchModel, stand_in: list, train):
-    """The named time mechanism refitted jointly with the friction correction from ``base`` (the
-    final model without its time mechanisms) on the training rows, as the second-order rival
-    is: the rival's equal. None when the final model is no catalog fit or more than one time
-    mechanism is named. -> candidates.ModelFit or None.
+    """The named mechanism a rival stands in for, refitted jointly with the friction correction
+    from ``base`` (the final model without it) on the training rows, as the rival is: the
+    rival's equal. None when the final model is no catalog fit or the rival stands in for more
+    than one mechanism (two time mechanisms). -> candidates.ModelFit or None.
 
     Measured on actuator_lag+friction_degradation@long_drive#7 (``--quick``, magnitude seed
     20261128: a 78 ms lag and a friction decline, one 40 s drive): the rival fitted 20.8 Hz at
@@ -229,9 +229,6 @@ def named_or_force_dynamics(data, sel, campaign, sigma_nm: float, alpha: float, 
     The rival's friction correction is refitted with it, so when it beats the named model it
     must also beat the named mechanism refitted the same way (``_named_refitted``); the weaker
     of the two comparisons decides."""
-    from clutch_model.diagnosis.selection import Selection, _compare, residual
-    from clutch_model.diagnosis.structure_test import DEFAULT_MAX_ORDER
-
     timed = time_mechanism_ids(sel.cause_ids) if sel.verdict == "named" else []
     if not timed:
         return sel, None
@@ -241,45 +238,141 @@ def named_or_force_dynamics(data, sel, campaign, sigma_nm: float, alpha: float, 
     say(f"{', '.join(timed)} named: checking a second-order force path beyond the catalog in its place")
     fit = fit_second_order(base, campaign, np.asarray(data.train_mask, bool), group_delay_s(stand_in),
                            noise_sigma_nm=sigma_nm)
+    what = (f"second-order force path (f_n {fit.parameters['f_n_hz']:.3g} Hz, "
+            f"damping {fit.parameters['damping']:.3g})")
+    return _rival_in_place(data, sel, base, stand_in, fit, what, "second_order_force_path", alpha, min_gain_frac,
+                           say, "the force path is not the named one's")
+
+
+def _rival_in_place(data, sel, base, stand_in: list, fit, what: str, key: str, alpha: float,
+                    min_gain_frac: float, say, conclusion: str):
+    """The rival ``fit`` (fitted on ``base``, the final model without the ``stand_in``
+    mechanisms, with its friction correction refitted) head to head with the named model on
+    the held-out rows, and with the named mechanism refitted the same way when the rival
+    wins; the weaker comparison decides -> (selection, the dict for the report). The rival
+    taking the name turns the verdict ``unexplained``, the named causes the closest, the
+    rival's figures under ``key`` in what they leave."""
+    from clutch_model.diagnosis.selection import Selection, _compare, residual
+    from clutch_model.diagnosis.structure_test import DEFAULT_MAX_ORDER
+
+    ids = [m.id for m in stand_in]
     r_named = residual(data, sel.final)
     r_rival = residual(data, fit)
     head = _compare(data, r_named, r_rival, DEFAULT_MAX_ORDER)
     takes, worse = rival_takes_the_name(data, head, r_named, r_rival, alpha, min_gain_frac)
-    found_against = ", ".join(timed)
+    found_against = ", ".join(ids)
     even = _named_refitted(sel, base, stand_in, np.asarray(data.train_mask, bool)) if takes else None
     if even is not None:
         # the rival's friction correction was refitted with it: it meets the named mechanism
-        # refitted the same way too, so that what it wins is the force path's
+        # refitted the same way too, so that what it wins is its own
         r_even = residual(data, even)
         head_even = _compare(data, r_even, r_rival, DEFAULT_MAX_ORDER)
-        refitted = f"{', '.join(timed)} refitted with the friction correction"
-        say(f"second-order force path against {refitted}: t = {head_even.t_stat:.1f}, "
+        refitted = f"{found_against} refitted with the friction correction"
+        say(f"{key.replace('_', ' ')} against {refitted}: t = {head_even.t_stat:.1f}, "
             f"RMSE {head_even.rmse_alt:.2f} vs {head_even.rmse_null:.2f} N*m")
         if head_even.t_stat < head.t_stat:
             head, found_against = head_even, refitted
             takes, worse = rival_takes_the_name(data, head, r_even, r_rival, alpha, min_gain_frac)
-    found = {"parameters": {k: float(v) for k, v in fit.parameters.items()}, "in_place_of": timed,
+    found = {"parameters": {k: float(v) for k, v in fit.parameters.items()}, "in_place_of": ids,
              "held_out_t": float(head.t_stat), "held_out_p": float(head.p_value),
              "innovation_variance_cut": float(head.gain_frac),
              "held_out_rmse": float(head.rmse_alt), "named_held_out_rmse": float(head.rmse_null),
              "against": found_against}
     if worse is not None:
         found["plain_worse_t"], found["plain_worse_p"] = float(worse.t_stat), float(worse.p_value)
-    say(f"second-order force path (f_n {fit.parameters['f_n_hz']:.3g} Hz, damping {fit.parameters['damping']:.3g}) "
-        f"against {found_against} on held-out rows: t = {head.t_stat:.1f}, RMSE {head.rmse_alt:.2f} vs "
+    say(f"{what} against {found_against} on held-out rows: t = {head.t_stat:.1f}, RMSE {head.rmse_alt:.2f} vs "
         f"{head.rmse_null:.2f} N*m" + (f" (plain squares larger at block t = {worse.t_stat:.2f}, p = {worse.p_value:.2f})"
                                        if worse is not None else ""))
+    found["took_the_name"] = bool(takes)
     if not takes:
-        found["took_the_name"] = False
         return sel, found
-    found["took_the_name"] = True
-    why = (f"{', '.join(sel.cause_ids)} predicts the held-out residual, but a second-order force path beyond "
-           f"the catalog (f_n {fit.parameters['f_n_hz']:.3g} Hz, damping {fit.parameters['damping']:.3g}) in "
-           f"place of {', '.join(timed)} predicts it better head to head (against {found_against}: held-out t = {head.t_stat:.1f}, "
-           f"RMSE {head.rmse_alt:.2f} against {head.rmse_null:.2f} N*m): the force path is not the named one's")
-    left = {"held_out_rmse": float(head.rmse_null), "second_order_force_path": found}
+    why = (f"{', '.join(sel.cause_ids)} predicts the held-out residual, but a {what} beyond the catalog in "
+           f"place of {', '.join(ids)} predicts it better head to head (against {found_against}: held-out t = "
+           f"{head.t_stat:.1f}, RMSE {head.rmse_alt:.2f} against {head.rmse_null:.2f} N*m): {conclusion}")
+    left = {"held_out_rmse": float(head.rmse_null), key: found}
     return (Selection("unexplained", [], sel.steps, sel.final, sel.baseline_structure, sel.remainder_structure,
                       list(sel.cause_ids), left, why, sel.run_level), found)
+
+
+# -- a play of constant width: the rival beyond the catalog of a named actuator_hysteresis -------
+
+PLAY_BOUNDS_N = (1.0, 5000.0)
+PLAY_START_QUANTILES = (0.25, 0.5, 0.75)   # the named band's half-width ratio x F at these force quantiles
+
+
+@njit(cache=True)
+def played_force(force, run_start, half_width_n):
+    """The force through a play of constant half-width ``half_width_n``: it moves only when the
+    input leaves [x - w, x + w]; each run starts at its first force (centred in the play)."""
+    out = np.empty(force.size)
+    x = 0.0
+    for k in range(force.size):
+        if k == 0 or run_start[k]:
+            x = force[k]
+        else:
+            x = min(max(x, force[k] - half_width_n), force[k] + half_width_n)
+        out[k] = x
+    return out
+
+
+class PlayObjective(ForcePathObjective):
+    """The constant-width play on the force path: x = [log half-width] then the friction correction."""
+
+    def __init__(self, base: ClutchModel, campaign, fit_mask, start_n: float, noise_sigma_nm: float = 1.0):
+        specs = [ParamSpec("half_width_n", True, PLAY_BOUNDS_N[0], PLAY_BOUNDS_N[1], np.array([start_n]))]
+        super().__init__(base, campaign, fit_mask, specs, noise_sigma_nm=noise_sigma_nm)
+
+    def path_force(self, values) -> np.ndarray:
+        pi = self._plant_inputs
+        return played_force(pi.force, pi.run_start, values[0])
+
+
+def play_starts_n(ratio: float, force, fit_mask) -> list:
+    """The play half-widths to start from: the named band (``ratio`` x F) at the training
+    rows' force quantiles PLAY_START_QUANTILES, within PLAY_BOUNDS_N."""
+    f = np.abs(np.asarray(force, float)[np.asarray(fit_mask, bool)])
+    f = f[np.isfinite(f)]
+    level = np.quantile(f, PLAY_START_QUANTILES) if f.size else np.full(len(PLAY_START_QUANTILES), 1000.0)
+    return [float(np.clip(ratio * v, *PLAY_BOUNDS_N)) for v in level]
+
+
+def fit_play(base: ClutchModel, campaign, fit_mask, starts_n, noise_sigma_nm: float = 1.0,
+             max_nfev: int = 40) -> ForcePathFit:
+    """The constant-width play on ``base`` (its hysteresis taken out), jointly with the friction
+    correction, on the training rows ``fit_mask``; started from the best of ``starts_n``."""
+    obj = PlayObjective(base, campaign, fit_mask, starts_n[0], noise_sigma_nm)
+    return _fit_from_best_start(obj, [[math.log(w)] for w in starts_n], max_nfev, "constant_width_play")
+
+
+def named_or_constant_play(data, sel, campaign, sigma_nm: float, alpha: float, min_gain_frac: float,
+                           say=lambda msg: None):
+    """A selection that named ``actuator_hysteresis``, checked against a play of constant width
+    in its place -> (selection, what the check found: a dict for the report, or None when there
+    was nothing to check).
+
+    The catalog's hysteresis is a band F(1 +- ratio) that grows with the force (ball-ramp
+    friction, proportional to the normal load); gear or linkage backlash is a play of constant
+    width. On a campaign whose forces span a narrow range the two are one, and the named band
+    stands; over a wide range the band fitted to a play is too wide at low force and too narrow
+    at high force, and the catalog then names an offset or a preload beside it to carry the
+    difference. So the play (one parameter, with the friction correction refitted, the other
+    named causes kept) takes the band's place and meets the named model head to head on the
+    held-out rows as the second-order force path meets a named time mechanism
+    (``_rival_in_place``): the play taking the name means the band is not the catalog's, and
+    the answer is ``unexplained``."""
+    named = sel.verdict == "named" and "actuator_hysteresis" in sel.cause_ids
+    if not named:
+        return sel, None
+    model = sel.final.fit.model
+    stand_in = [m for m in model.mechanisms if m.id == "actuator_hysteresis"]
+    base = model.with_mechanisms([m for m in model.mechanisms if m.id != "actuator_hysteresis"])
+    train = np.asarray(data.train_mask, bool)
+    say("actuator_hysteresis named: checking a play of constant width beyond the catalog in its place")
+    fit = fit_play(base, campaign, train, play_starts_n(float(stand_in[0].values["ratio"]), campaign.force, train),
+                   noise_sigma_nm=sigma_nm)
+    what = f"play of constant half-width {fit.parameters['half_width_n']:.4g} N"
+    return _rival_in_place(data, sel, base, stand_in, fit, what, "constant_width_play", alpha, min_gain_frac, say,
+                           "the band does not grow with the force as the catalog's hysteresis does")
 
 
 # -- a slew-rate-limited force path: the rival beyond the catalog of `none` -----------------------
