@@ -40,7 +40,7 @@ from clutch_model.diagnosis.input_hold import decide_input_noise, with_midpoint_
 from clutch_model.diagnosis.lockup import without_locked_torque
 from clutch_model.diagnosis.run_level import within_run_forecast
 from clutch_model.diagnosis.force_dynamics import (named_or_constant_play, named_or_force_dynamics,
-                                                   none_or_rate_limit)
+                                                   none_or_constant_play, none_or_rate_limit)
 from clutch_model.diagnosis.bench_anchor import named_and_bench_anchored, none_or_bench_anchored
 from clutch_model.diagnosis.fitting import CANDIDATE_IDS, CandidateFit, fit_candidate
 from clutch_model.diagnosis.friction_ridge import held_to_the_data
@@ -642,11 +642,14 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
         sel, discovery = _catalog_or_beyond(data, base, campaign, bench_model, sel, cands, say, whole_bag)
         timings["discovery"] = time.perf_counter() - t0
 
-    # nothing found, in the catalog or beyond: a rate-limited force path (force_dynamics.py)
+    # nothing found, in the catalog or beyond: a rate-limited force path, a constant play (force_dynamics.py)
     if sel.verdict == "none" and not (discovery is not None and discovery.accepted):
         t0 = time.perf_counter()
         sel, rate_limit = none_or_rate_limit(data, sel, campaign, sigma_guess, ALPHA, NAMED_GAIN_FRAC, say)
         force_dynamics = force_dynamics or rate_limit
+        # and a play of constant width (backlash) on the force path
+        sel, play = none_or_constant_play(data, sel, campaign, sigma_guess, ALPHA, NAMED_GAIN_FRAC, say)
+        force_band = force_band or play
         timings["force dynamics"] += time.perf_counter() - t0
 
     # still nothing: a cause the car calibration absorbed, seen against the bench (bench_anchor.py)

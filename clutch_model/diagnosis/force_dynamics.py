@@ -24,6 +24,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numba import njit
 
+from clutch_model.diagnosis.candidates import FORCE_BAND_NOISE_FACTOR
 from clutch_model.diagnosis.fitting import (N_CORR, CampaignObjective, solve_from, time_mechanism_ids,
                                             time_parameter_names)
 from clutch_model.plant.mechanisms import ParamSpec
@@ -370,9 +371,11 @@ def named_or_constant_play(data, sel, campaign, sigma_nm: float, alpha: float, m
     say("actuator_hysteresis named: checking a play of constant width beyond the catalog in its place")
     fit = fit_play(base, campaign, train, play_starts_n(float(stand_in[0].values["ratio"]), campaign.force, train),
                    noise_sigma_nm=sigma_nm)
-    what = f"play of constant half-width {fit.parameters['half_width_n']:.4g} N"
-    return _rival_in_place(data, sel, base, stand_in, fit, what, "constant_width_play", alpha, min_gain_frac, say,
-                           "the band does not grow with the force as the catalog's hysteresis does")
+    w = float(fit.parameters["half_width_n"])
+    out, found = _rival_in_place(data, sel, base, stand_in, fit, f"play of constant half-width {w:.4g} N",
+                                 "constant_width_play", alpha, min_gain_frac, say,
+                                 "the band does not grow with the force as the catalog's hysteresis does")
+    return _unless_below_force_resolution(out, sel, found, w, say)
 
 
 # -- a slew-rate-limited force path: the rival beyond the catalog of `none` -----------------------
@@ -440,37 +443,94 @@ def none_or_rate_limit(data, sel, campaign, sigma_nm: float, alpha: float, min_g
     actuator_rate_limit@few_long (a 23.5 kN/s limit) the calibrated model read `none`; the
     rate limit fits 24.0 kN/s, held-out t = 23.6, RMSE 26.5 -> 8.3 N*m. On the 39 `none`
     campaigns (13 conditions x seeds 1, 3, 7) the largest t was 2.1."""
-    from clutch_model.diagnosis.selection import Selection, _compare, _own_contribution, residual
-    from clutch_model.diagnosis.structure_test import DEFAULT_MAX_ORDER
-
     if sel.verdict != "none":
         return sel, None
     say("nothing named: checking a slew-rate-limited force path beyond the catalog")
     train = np.asarray(data.train_mask, bool)
-    model = sel.final.fit.model
-    fit = fit_rate_limit(model, campaign, train, noise_sigma_nm=sigma_nm)
-    r_fit = residual(data, fit)
-    head = _compare(data, residual(data, sel.final), r_fit, DEFAULT_MAX_ORDER)
+    fit = fit_rate_limit(sel.final.fit.model, campaign, train, noise_sigma_nm=sigma_nm)
     rate = float(fit.parameters["rate_n_per_s"])
-    found = {"kind": "rate-limited force path", "parameters": {"rate_n_per_s": rate},
+    return _none_against(data, sel, fit, "rate-limited force path", f"rate-limited force path ({rate:.3g} N/s)",
+                         f"the force slewed at most {rate:.3g} N/s toward the measured one (a rate-limited actuator)",
+                         "rate_limited_force_path", alpha, min_gain_frac, say)
+
+
+def _none_against(data, sel, fit, kind: str, what: str, physics: str, key: str, alpha: float,
+                  min_gain_frac: float, say):
+    """A force path beyond the catalog ``fit`` (on the calibrated model, its friction correction
+    refitted with it) against the calibrated model on the held-out rows, where nothing was
+    named -> (selection, the dict for the report). It takes the name when it predicts the
+    held-out residual significantly better (at ``alpha``, ``min_gain_frac`` of the innovation
+    variance, and a lower plain held-out RMSE) and beats its twin, the friction correction
+    refitted alone, the same way (the gain must be the force path's, not the refit's); the
+    verdict is then ``unexplained``, the rival's figures under ``key`` in what is left."""
+    from clutch_model.diagnosis.selection import Selection, _compare, _own_contribution, residual
+    from clutch_model.diagnosis.structure_test import DEFAULT_MAX_ORDER
+
+    train = np.asarray(data.train_mask, bool)
+    model = sel.final.fit.model
+    head = _compare(data, residual(data, sel.final), residual(data, fit), DEFAULT_MAX_ORDER)
+    found = {"kind": kind, "parameters": {k: float(v) for k, v in fit.parameters.items()},
              "held_out_t": float(head.t_stat), "held_out_p": float(head.p_value),
              "innovation_variance_cut": float(head.gain_frac),
              "held_out_rmse": float(head.rmse_alt), "calibrated_held_out_rmse": float(head.rmse_null)}
-    say(f"rate-limited force path ({rate:.3g} N/s) against the calibrated model on held-out rows: "
+    say(f"{what} against the calibrated model on held-out rows: "
         f"t = {head.t_stat:.1f}, RMSE {head.rmse_alt:.2f} vs {head.rmse_null:.2f} N*m")
     found["took_the_name"] = bool(head.significant(alpha, min_gain_frac, plain_gain=True))
     if found["took_the_name"]:
-        # its twin: the friction correction refitted alone, as the rate limit's was (the gain must
-        # be the force path's, not the refit's), compared as every candidate's
+        # its twin: the friction correction refitted alone, as the rival's was, compared as
+        # every candidate's
         fit.twin_predicted = np.asarray(sel.final.context.friction_only(model, train), float)
         own, _ = _own_contribution(data, fit, DEFAULT_MAX_ORDER)
         found["against_twin_t"] = float(own.t_stat)
         found["took_the_name"] = bool(own.significant(alpha, min_gain_frac, plain_gain=True, noise_units=True))
     if not found["took_the_name"]:
         return sel, found
-    why = (f"{sel.reason}; but a force path beyond the catalog does: the force slewed at most {rate:.3g} N/s "
-           f"toward the measured one (a rate-limited actuator) predicts the held-out residual (t = "
-           f"{head.t_stat:.1f}, RMSE {head.rmse_alt:.2f} against {head.rmse_null:.2f} N*m)")
-    left = {"held_out_rmse": float(head.rmse_null), "rate_limited_force_path": found}
+    why = (f"{sel.reason}; but a force path beyond the catalog does: {physics} predicts the held-out "
+           f"residual (t = {head.t_stat:.1f}, RMSE {head.rmse_alt:.2f} against {head.rmse_null:.2f} N*m)")
+    left = {"held_out_rmse": float(head.rmse_null), key: found}
     return (Selection("unexplained", [], sel.steps, sel.final, sel.baseline_structure, sel.remainder_structure,
                       [], left, why, sel.run_level), found)
+
+
+NONE_PLAY_STARTS_N = tuple(np.geomspace(30.0, 1500.0, 8))   # the play's starts where nothing is named
+
+
+def none_or_constant_play(data, sel, campaign, sigma_nm: float, alpha: float, min_gain_frac: float,
+                          say=lambda msg: None):
+    """A selection that named nothing, checked against a play of constant width on the force
+    path (gear or linkage backlash) -> (selection, what the check found, or None when there was
+    nothing to check). The catalog's hysteresis band grows with the force; a play of constant
+    width over forces of a wide range is fitted by no catalog mechanism, and the car
+    calibration absorbs part of it into the friction (a band fitted on top only adds error).
+    The play (one parameter, started from NONE_PLAY_STARTS_N, with the friction correction) is
+    judged as the rate limit is (``_none_against``)."""
+    if sel.verdict != "none":
+        return sel, None
+    say("nothing named: checking a play of constant width on the force path beyond the catalog")
+    before = sel
+    fit = fit_play(sel.final.fit.model, campaign, np.asarray(data.train_mask, bool), list(NONE_PLAY_STARTS_N),
+                   noise_sigma_nm=sigma_nm)
+    w = float(fit.parameters["half_width_n"])
+    sel, found = _none_against(data, sel, fit, "constant-width play", f"play of constant half-width {w:.4g} N",
+                               f"the force through a play of constant half-width {w:.4g} N (backlash)",
+                               "constant_width_play", alpha, min_gain_frac, say)
+    return _unless_below_force_resolution(sel, before, found, w, say)
+
+
+def _unless_below_force_resolution(sel, before, found: dict, half_width_n: float, say):
+    """A play narrower than FORCE_BAND_NOISE_FACTOR times the force sensor's noise is below
+    the force's resolution (candidates.ModelFit._below_force_resolution, the catalog band's
+    rule): it filters the force noise's reversals and is no actuator's play, so it never takes
+    the name (``before``: the selection as it was). Where nothing is hidden the play fits its
+    lower bound of 1 N, and its gain is the friction correction refitted with it."""
+    ctx = getattr(sel.final, "context", None) or getattr(before.final, "context", None)
+    noise = float(ctx.force_noise_n) if ctx is not None else float("nan")
+    found["force_noise_n"] = noise
+    if not (np.isfinite(noise) and half_width_n < FORCE_BAND_NOISE_FACTOR * noise):
+        return sel, found
+    if found.get("took_the_name"):
+        say(f"the play of {half_width_n:.3g} N is below the force's resolution ({FORCE_BAND_NOISE_FACTOR:g} x "
+            f"the force noise of {noise:.3g} N): not taken")
+    found["took_the_name"] = False
+    found["below_force_resolution"] = True
+    return before, found

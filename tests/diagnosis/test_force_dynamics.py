@@ -1,10 +1,12 @@
-"""The second-order force path, the rival beyond the catalog of a named time mechanism
-(clutch_model/diagnosis/force_dynamics.py)."""
+"""The force paths beyond the catalog (clutch_model/diagnosis/force_dynamics.py): the
+second-order force path, the rival of a named time mechanism, and the play of constant width,
+the rival of a named hysteresis band."""
 import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from clutch_model.diagnosis.force_dynamics import group_delay_s, second_order_force, time_mechanism_ids
+from clutch_model.diagnosis.force_dynamics import (group_delay_s, play_starts_n, played_force, second_order_force,
+                                                   time_mechanism_ids)
 from clutch_model.plant.mechanisms import make_mechanism
 from clutch_model.virtual_car.signals import AR1Noise
 
@@ -52,6 +54,51 @@ def test_time_mechanisms_and_their_group_delay():
     mechs = [make_mechanism("transport_delay", delay_s=0.03), make_mechanism("actuator_lag", tau_s=0.05),
              make_mechanism("drag_torque", coeff_nm_per_rad_s=2.0)]
     assert group_delay_s(mechs) == pytest.approx(0.08)
+
+
+@pytest.mark.parametrize("w", [50.0, 400.0])
+def test_played_force_is_the_play_operator_on_a_sine(w):
+    """Through a play of half-width w, a sine of amplitude A > w (from its centre) comes out
+    with peaks A - w, never further than w from the input, flat for the time the input takes
+    to fall 2 w after each peak, and then following it exactly (offset by w)."""
+    t = np.arange(0.0, 10.0, 0.001)
+    amp, level = 1500.0, 3000.0
+    force = level + amp * np.sin(2 * np.pi * 0.5 * t)
+    run_start = np.zeros(t.size, bool)
+    run_start[0] = True
+    got = played_force(force, run_start, w)
+    assert np.max(np.abs(got - force)) <= w + 1e-9
+    late = t > 2.0                                            # after the first reversal
+    assert got[late].max() == pytest.approx(level + amp - w, abs=1e-6)
+    assert got[late].min() == pytest.approx(level - amp + w, abs=1e-6)
+    # after the peak at t = 2.5 s the output holds until the input has fallen 2 w
+    t_release = 2.5 + np.arccos(1 - 2 * w / amp) / (2 * np.pi * 0.5)
+    hold = (t > 2.5 + 0.01) & (t < t_release - 0.01)
+    np.testing.assert_allclose(got[hold], level + amp - w, atol=1e-9)
+    follow = (t > t_release + 0.01) & (t < 3.5 - 0.01)
+    np.testing.assert_allclose(got[follow], force[follow] + w, atol=1e-9)
+
+
+def test_played_force_restarts_each_run_and_a_zero_play_is_the_force():
+    rng = np.random.default_rng(4)
+    force = 2000 + rng.normal(0, 300, 600)
+    run_start = np.zeros(600, bool)
+    run_start[[0, 250]] = True
+    np.testing.assert_array_equal(played_force(force, run_start, 0.0), force)
+    got = played_force(force, run_start, 200.0)
+    assert got[0] == force[0] and got[250] == force[250]     # each run centred on its first force
+    ref = np.empty_like(force)                               # the play row by row
+    for k in range(600):
+        ref[k] = force[k] if run_start[k] else min(max(ref[k - 1], force[k] - 200.0), force[k] + 200.0)
+    np.testing.assert_array_equal(got, ref)
+
+
+def test_play_starts_are_the_named_band_at_the_training_forces():
+    force = np.r_[np.full(100, 1000.0), np.full(100, 3000.0), np.full(100, 9000.0)]
+    fit = np.ones(300, bool)
+    fit[200:] = False                                        # the 9 kN rows are held out
+    starts = play_starts_n(0.1, force, fit)
+    assert starts == [pytest.approx(100.0), pytest.approx(200.0), pytest.approx(300.0)]
 
 
 # --- the rival's plain error: larger by chance or larger ------------------------------------------
