@@ -264,8 +264,10 @@ def test_constant_width_backlash_is_not_named_the_catalog_hysteresis(tmp_path, c
     assert check["took_the_name"], check
     assert (check.get("in_place_of") == ["actuator_hysteresis"]) == named_before, check
     assert check["parameters"]["half_width_n"] == pytest.approx(half_width, rel=0.2), check
-    # what the play leaves on the held-out rows is near the sensor noise (8 N*m)
-    assert check["held_out_rmse"] < 12.0, check
+    # the play leaves less than half the held-out error of the model without it (named band or
+    # calibrated), near the sensor noise (8 N*m; held at 10 Hz, timing adds to it)
+    without = check.get("named_held_out_rmse", check.get("calibrated_held_out_rmse"))
+    assert check["held_out_rmse"] < min(0.5 * without, 15.0), check
 
 
 # A slew-rate-limited actuator (23.5 kN/s) is outside the catalog and no first-order mechanism
