@@ -378,6 +378,75 @@ def named_or_constant_play(data, sel, campaign, sigma_nm: float, alpha: float, m
     return _unless_below_force_resolution(out, sel, found, w, say)
 
 
+# -- a force-sensor offset: the rival beyond the catalog of the named causes ---------------------
+
+FORCE_OFFSET_BOUNDS_KN = (-5.0, 5.0)
+FORCE_OFFSET_STARTS_KN = (-1.0, -0.4, -0.15, 0.15, 0.4, 1.0)
+
+
+@njit(cache=True)
+def offset_force(force, offset_n):
+    """The force the pack gets when the sensor reads it ``offset_n`` low (pack = F + offset,
+    at least 0)."""
+    out = np.empty(force.size)
+    for k in range(force.size):
+        out[k] = max(force[k] + offset_n, 0.0)
+    return out
+
+
+class ForceOffsetObjective(ForcePathObjective):
+    """A signed offset on the measured force: x = [offset in kN] then the friction correction."""
+
+    def __init__(self, base: ClutchModel, campaign, fit_mask, noise_sigma_nm: float = 1.0):
+        specs = [ParamSpec("offset_kn", False, FORCE_OFFSET_BOUNDS_KN[0], FORCE_OFFSET_BOUNDS_KN[1],
+                           np.array([FORCE_OFFSET_STARTS_KN[0]]))]
+        super().__init__(base, campaign, fit_mask, specs, noise_sigma_nm=noise_sigma_nm)
+
+    def path_force(self, values) -> np.ndarray:
+        return offset_force(self._plant_inputs.force, 1e3 * values[0])
+
+
+def fit_force_offset(base: ClutchModel, campaign, fit_mask, noise_sigma_nm: float = 1.0,
+                     max_nfev: int = 40) -> ForcePathFit:
+    """The signed force offset on ``base``, jointly with the friction correction, on the
+    training rows ``fit_mask``; started from the best of FORCE_OFFSET_STARTS_KN (and none)."""
+    obj = ForceOffsetObjective(base, campaign, fit_mask, noise_sigma_nm)
+    fit = _fit_from_best_start(obj, [[v] for v in FORCE_OFFSET_STARTS_KN], max_nfev, "force_offset")
+    fit.parameters = {"offset_n": 1e3 * float(fit.parameters["offset_kn"])}
+    return fit
+
+
+def named_or_force_offset(data, sel, campaign, sigma_nm: float, alpha: float, min_gain_frac: float,
+                          say=lambda msg: None):
+    """Named causes checked against a signed offset on the measured force in their place ->
+    (selection, what the check found, or None when there was nothing to check).
+
+    A force sensor that reads low (or high) by a constant gives the pack more (less) force
+    than the model is driven with: a torque error that scales with the friction coefficient,
+    largest where the force is small. Read high it is the catalog's spring_preload exactly,
+    pack force max(F - p, 0); read low it is no catalog mechanism (a preload cannot be negative),
+    and the catalog names what fits part of it: a drag torque, an offset. So the signed offset
+    (one parameter, with the friction correction refitted) takes the place of every named
+    mechanism and meets the named model head to head on the held-out rows as the other rivals
+    do (``_rival_in_place``); on a true preload it can only tie. Taking the name means the
+    named causes stand in for an error in the force the model is driven with: ``unexplained``."""
+    if sel.verdict != "named" or not sel.cause_ids:
+        return sel, None
+    model = sel.final.fit.model
+    named = set(sel.cause_ids)
+    stand_in = [m for m in model.mechanisms if m.id in named]
+    if not stand_in:
+        return sel, None
+    base = model.with_mechanisms([m for m in model.mechanisms if m.id not in named])
+    say(f"{', '.join(sel.cause_ids)} named: checking an offset on the measured force beyond the catalog in their place")
+    fit = fit_force_offset(base, campaign, np.asarray(data.train_mask, bool), noise_sigma_nm=sigma_nm)
+    c = float(fit.parameters["offset_n"])
+    out, found = _rival_in_place(data, sel, base, stand_in, fit, f"offset of {c:+.4g} N on the measured force",
+                                 "force_offset", alpha, min_gain_frac, say,
+                                 "the force the model is driven with is off by a constant")
+    return _unless_below_force_resolution(out, sel, found, abs(c), say)
+
+
 # -- a slew-rate-limited force path: the rival beyond the catalog of `none` -----------------------
 
 RATE_BOUNDS_N_PER_S = (1e3, 1e6)

@@ -95,6 +95,7 @@ def report_dict(d: Diagnosis) -> dict:
                       "run_level": sel.run_level.as_dict() if sel and sel.run_level is not None else None,
                       "force_path_check": d.force_path_check,
                       "force_band_check": d.force_band_check,
+                      "force_offset_check": d.force_offset_check,
                       "bench_anchor": d.bench_anchor,
                       "ridged_selection": d.ridged_selection,
                       "discovery": ({"accepted": d.discovery.accepted, "reason": d.discovery.selection.reason,
