@@ -41,7 +41,7 @@ from clutch_model.diagnosis.lockup import without_locked_torque
 from clutch_model.diagnosis.run_level import within_run_forecast
 from clutch_model.diagnosis.force_dynamics import (named_or_constant_play, named_or_force_dynamics,
                                                    named_or_force_offset, none_or_constant_play,
-                                                   none_or_rate_limit)
+                                                   none_or_force_offset, none_or_rate_limit)
 from clutch_model.diagnosis.bench_anchor import named_and_bench_anchored, none_or_bench_anchored
 from clutch_model.diagnosis.fitting import CANDIDATE_IDS, CandidateFit, fit_candidate
 from clutch_model.diagnosis.friction_ridge import held_to_the_data
@@ -654,6 +654,9 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
         # and a play of constant width (backlash) on the force path
         sel, play = none_or_constant_play(data, sel, campaign, sigma_guess, ALPHA, NAMED_GAIN_FRAC, say)
         force_band = force_band or play
+        # and an offset on the measured force
+        sel, reads_off = none_or_force_offset(data, sel, campaign, sigma_guess, ALPHA, NAMED_GAIN_FRAC, say)
+        force_offset = force_offset or reads_off
         timings["force dynamics"] += time.perf_counter() - t0
 
     # still nothing: a cause the car calibration absorbed, seen against the bench (bench_anchor.py)
@@ -661,6 +664,9 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
         t0 = time.perf_counter()
         sel, anchored = none_or_bench_anchored(data, sel, ctx, ids, ALPHA, NAMED_GAIN_FRAC, say)
         bench_anchor = anchored or bench_anchor
+        if sel.verdict == "named" and force_offset is None:
+            # a cause named on the bench friction meets the force offset as a named one does
+            sel, force_offset = named_or_force_offset(data, sel, campaign, sigma_guess, ALPHA, NAMED_GAIN_FRAC, say)
         timings["bench anchor"] += time.perf_counter() - t0
 
     # -- stage 4: extend ------------------------------------------------------------------------

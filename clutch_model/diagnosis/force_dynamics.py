@@ -447,6 +447,26 @@ def named_or_force_offset(data, sel, campaign, sigma_nm: float, alpha: float, mi
     return _unless_below_force_resolution(out, sel, found, abs(c), say)
 
 
+def none_or_force_offset(data, sel, campaign, sigma_nm: float, alpha: float, min_gain_frac: float,
+                         say=lambda msg: None):
+    """A selection that named nothing, checked against a signed offset on the measured force
+    (fitted on the calibrated model with the friction correction, judged as the rate limit is:
+    ``_none_against``) -> (selection, what the check found, or None when there was nothing to
+    check). The car calibration absorbs most of a force sensor's offset into the friction's
+    level and pressure terms, and what it leaves, largest at small forces, no catalog
+    mechanism predicts; an offset under twice the force noise never takes the name."""
+    if sel.verdict != "none":
+        return sel, None
+    say("nothing named: checking an offset on the measured force beyond the catalog")
+    before = sel
+    fit = fit_force_offset(sel.final.fit.model, campaign, np.asarray(data.train_mask, bool), noise_sigma_nm=sigma_nm)
+    c = float(fit.parameters["offset_n"])
+    sel, found = _none_against(data, sel, fit, "force offset", f"offset of {c:+.4g} N on the measured force",
+                               f"the force read {abs(c):.4g} N {'low' if c > 0 else 'high'} (a force-sensor offset)",
+                               "force_offset", alpha, min_gain_frac, say)
+    return _unless_below_force_resolution(sel, before, found, abs(c), say)
+
+
 # -- a slew-rate-limited force path: the rival beyond the catalog of `none` -----------------------
 
 RATE_BOUNDS_N_PER_S = (1e3, 1e6)

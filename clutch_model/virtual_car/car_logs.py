@@ -53,6 +53,10 @@ Effects outside the catalog (``effects``: [{"name": ..., parameter: value}]):
                                      leaves [x − w, x + w] (gear or linkage backlash); mimics
                                      actuator_hysteresis, whose band F(1 ± ratio) grows with the
                                      force (a force-path effect)
+  force_sensor_offset    offset_n    the force sensor reads the force offset_n low: the pack
+                                     gets the logged force + offset_n (a zero or calibration
+                                     error); read high it would be the catalog's spring_preload,
+                                     read low it is no catalog mechanism (a force-path effect)
 Plant effects (the last three) run in ``_trajectory_friction_factor``, the kernels' own step
 functions with the friction factor written through the degradation slot each row (so the
 factor heats the pack like any friction); measurement effects post-process the fine grid.
@@ -112,6 +116,10 @@ EFFECTS = {
                           "mimics": "actuator_hysteresis", "catalog_equivalent": None,
                           "physics": "the pack force follows the measured force through a play of "
                                      "constant half-width half_width_n (gear or linkage backlash)"},
+    "force_sensor_offset": {"kind": "force-path", "parameters": {"offset_n": 500.0},
+                            "mimics": "spring_preload", "catalog_equivalent": None,
+                            "physics": "the force sensor reads offset_n low: the pack gets the "
+                                       "logged force + offset_n"},
 }
 
 DEFAULT_CLOCKS = {
@@ -558,6 +566,9 @@ def synthesize_car_logs(spec: CarLogSpec | None = None, base_model: ClutchModel 
     backlash = spec.effect_values("actuator_backlash")
     if backlash is not None:
         force_pack = _played(force_pack, run_start, float(backlash["half_width_n"]))
+    reads_low = spec.effect_values("force_sensor_offset")
+    if reads_low is not None:
+        force_pack = force_pack + float(reads_low["offset_n"])
     plant, eff_info = _simulate_plant(true_model, spec, t_abs, force_pack, slip_all, sump_all, run_start, rng_eff)
     # the driveline sets the transmitted torque while locked (below the static capacity)
     locked = plant["locked"] & np.isfinite(load_all)

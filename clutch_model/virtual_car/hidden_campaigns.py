@@ -130,7 +130,8 @@ EFFECT_RANGES = {"torque_sensor_lowpass": ("tau_s", (0.02, 0.15)),
                  "pressure_temperature_cross": ("coeff", (1.5e-3, 4e-3)),
                  "actuator_rate_limit": ("rate_n_per_s", (2.0e4, 6.0e4)),
                  "actuator_second_order": ("f_n_hz", (1.5, 4.0)),
-                 "actuator_backlash": ("half_width_n", (150.0, 500.0))}
+                 "actuator_backlash": ("half_width_n", (150.0, 500.0)),
+                 "force_sensor_offset": ("offset_n", (300.0, 800.0))}
 
 
 @dataclass(frozen=True)
@@ -152,7 +153,7 @@ def _cases() -> dict:
     out += [Case(e, "lookalike" if EFFECTS[e]["mimics"] else "outside", effects=(e,))
             for e in ("torque_sensor_lowpass", "slip_power_fade", "run_friction_level",
                       "torque_ripple", "pressure_temperature_cross", "actuator_rate_limit",
-                      "actuator_second_order", "actuator_backlash")]
+                      "actuator_second_order", "actuator_backlash", "force_sensor_offset")]
     return {c.name: c for c in out}
 
 

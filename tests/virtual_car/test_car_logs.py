@@ -291,6 +291,19 @@ def test_actuator_backlash_drives_the_plant_through_a_play_of_constant_width():
     assert truth["mimics"] == "actuator_hysteresis" and on.spec.expected_cause == "unexplained"
 
 
+def test_force_sensor_offset_drives_the_plant_with_more_force_than_logged():
+    """force_sensor_offset: the force sensor reads the request, the pack gets it plus the
+    offset (the plant driven with request + c gives the generated torque)."""
+    from clutch_model.virtual_car.car_logs import CarLogSpec, synthesize_car_logs
+    c = 450.0
+    base = synthesize_car_logs(CarLogSpec(seed=2, n_runs=1))
+    on = synthesize_car_logs(CarLogSpec(seed=2, n_runs=1, effects=[{"name": "force_sensor_offset", "offset_n": c}]))
+    np.testing.assert_array_equal(on.runs[0].fine["applied_force_n"], base.runs[0].fine["applied_force_n"])
+    _assert_plant_driven_by(base.runs[0].fine["applied_force_n"] + c, on, base, rtol=1e-9, atol=1e-6,
+                            min_change_rms_nm=10.0)
+    assert on.spec.expected_cause == "unexplained"
+
+
 def test_cli_car_logs(tmp_path):
     from clutch_sim.cli import main
     out = tmp_path / "c"
