@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from clutch_model.diagnosis.force_dynamics import (group_delay_s, play_starts_n, played_force, second_order_force,
-                                                   time_mechanism_ids)
+from clutch_model.diagnosis.force_dynamics import (group_delay_s, offset_force, play_starts_n, played_force,
+                                                   second_order_force, time_mechanism_ids)
 from clutch_model.plant.mechanisms import make_mechanism
 from clutch_model.virtual_car.signals import AR1Noise
 
@@ -99,6 +99,24 @@ def test_play_starts_are_the_named_band_at_the_training_forces():
     fit[200:] = False                                        # the 9 kN rows are held out
     starts = play_starts_n(0.1, force, fit)
     assert starts == [pytest.approx(100.0), pytest.approx(200.0), pytest.approx(300.0)]
+
+
+def test_a_force_read_high_is_the_catalog_preload_and_read_low_is_not():
+    """offset_force(F, -p) is the pack force of the catalog's spring_preload p run through the
+    plant (the same torque), and a sensor reading low gives more force everywhere."""
+    from clutch_model.plant.params import load_model
+    from clutch_model.plant.simulate import simulate
+
+    t = np.arange(0.0, 4.0, 0.005)
+    force = 1500 + 1200 * np.sin(2 * np.pi * 0.6 * t)
+    slip, sump = np.full(t.size, 20.0), np.full(t.size, 60.0)
+    model = load_model(None)
+    preloaded = simulate(model.with_mechanisms([make_mechanism("spring_preload", preload_n=400.0)]),
+                         t, force, slip, sump).torque_nm
+    read_high = simulate(model, t, offset_force(force, -400.0), slip, sump).torque_nm
+    np.testing.assert_allclose(read_high, preloaded, rtol=1e-9, atol=1e-9)
+    assert np.all(offset_force(force, 400.0) == force + 400.0)
+    assert offset_force(np.array([100.0]), -400.0)[0] == 0.0
 
 
 # --- the rival's plain error: larger by chance or larger ------------------------------------------
