@@ -295,6 +295,114 @@ def _rival_in_place(data, sel, base, stand_in: list, fit, what: str, key: str, a
                       list(sel.cause_ids), left, why, sel.run_level), found)
 
 
+# -- an asymmetric first-order lag: the second rival beyond the catalog of a named time mechanism --
+
+LAG_BOUNDS_S = (2e-3, 2.0)
+LAG_START_RATIOS = (1 / 8, 1 / 3, 1.0, 3.0, 8.0)   # tau_release / tau_apply, about the named delay
+ASYMMETRY_MIN_RATIO = 1.5   # two time constants closer than this are the catalog's one lag
+
+
+@njit(cache=True)
+def asymmetric_lagged_force(t, force, run_start, tau_apply_s, tau_release_s, max_substep_s=MAX_SUBSTEP_S):
+    """The force through a first-order lag of time constant ``tau_apply_s`` while it rises
+    toward the input and ``tau_release_s`` while it falls, on the rows ``t`` (s), each run from
+    its first force. The input is linear between rows; each substep of at most
+    ``max_substep_s`` is the exact response to it at the time constant the sign of input - x
+    at the substep's middle chooses (only a crossing inside a substep is approximated)."""
+    n = force.size
+    out = np.empty(n)
+    x = 0.0
+    for k in range(n):
+        if k == 0 or run_start[k]:
+            x = force[k]
+            out[k] = x
+            continue
+        dt = t[k] - t[k - 1]
+        if not dt > 0.0:
+            out[k] = x
+            continue
+        m = int(math.ceil(dt / max_substep_s))
+        h = dt / m
+        e_up, e_down = math.exp(-h / tau_apply_s), math.exp(-h / tau_release_s)
+        f0, f1 = force[k - 1], force[k]
+        slope = (f1 - f0) / dt
+        for j in range(m):
+            fa = f0 + (f1 - f0) * (j / m)
+            up = fa + 0.5 * h * slope > x
+            tau = tau_apply_s if up else tau_release_s
+            e = e_up if up else e_down
+            # x' = (fa + slope s - x) / tau over s in [0, h], exactly
+            x = fa + slope * h - slope * tau + (x - fa + slope * tau) * e
+        out[k] = x
+    return out
+
+
+class AsymmetricLagObjective(ForcePathObjective):
+    """The asymmetric first-order lag on the force path: x = [log tau_apply, log tau_release]
+    then the friction correction."""
+
+    def __init__(self, base: ClutchModel, campaign, fit_mask, delay_s: float, noise_sigma_nm: float = 1.0):
+        d = float(np.clip(delay_s, *LAG_BOUNDS_S))
+        specs = [ParamSpec("tau_apply_s", True, LAG_BOUNDS_S[0], LAG_BOUNDS_S[1], np.array([d])),
+                 ParamSpec("tau_release_s", True, LAG_BOUNDS_S[0], LAG_BOUNDS_S[1], np.array([d]))]
+        super().__init__(base, campaign, fit_mask, specs, noise_sigma_nm=noise_sigma_nm)
+
+    def path_force(self, values) -> np.ndarray:
+        pi = self._plant_inputs
+        return asymmetric_lagged_force(pi.t, pi.force, pi.run_start, values[0], values[1])
+
+
+def fit_asymmetric_lag(base: ClutchModel, campaign, fit_mask, delay_s: float, noise_sigma_nm: float = 1.0,
+                       max_nfev: int = 40) -> ForcePathFit:
+    """The asymmetric lag on ``base`` (its time mechanisms taken out), jointly with the
+    friction correction, on the training rows ``fit_mask``; started from the best of the pairs
+    whose geometric mean is the named mechanisms' delay ``delay_s`` and whose ratio is one of
+    LAG_START_RATIOS."""
+    obj = AsymmetricLagObjective(base, campaign, fit_mask, delay_s, noise_sigma_nm)
+    d = float(np.clip(delay_s, 5e-3, 0.5))
+    starts = [[math.log(d / math.sqrt(r)), math.log(d * math.sqrt(r))] for r in LAG_START_RATIOS]
+    return _fit_from_best_start(obj, starts, max_nfev, "asymmetric_lag")
+
+
+def named_or_asymmetric_lag(data, sel, campaign, sigma_nm: float, alpha: float, min_gain_frac: float,
+                            say=lambda msg: None):
+    """A selection that named a time mechanism, checked against a first-order lag on the force
+    path whose time constant differs between applying and releasing -> (selection, what the
+    check found, or None when there was nothing to check).
+
+    A hydraulic actuator filled by a pump and drained through an orifice applies fast and
+    releases slowly (or the reverse): one lag, two time constants. The catalog's time
+    mechanisms each have one, and the one fitted to it is too slow on the rising edges and too
+    fast on the falling ones; on campaigns with a noisy, coloured torque the misfit can read as
+    a sensor lag. So the asymmetric lag (two parameters, with the friction correction refitted,
+    the other named causes kept) takes the named time mechanisms' place and meets the named
+    model head to head as the second-order force path does (``_rival_in_place``). On a true
+    symmetric lag it can only tie; and two time constants within ASYMMETRY_MIN_RATIO of each
+    other are the catalog's lag, never taking the name."""
+    timed = time_mechanism_ids(sel.cause_ids) if sel.verdict == "named" else []
+    if not timed:
+        return sel, None
+    model = sel.final.fit.model
+    stand_in = [m for m in model.mechanisms if m.id in timed]
+    base = model.with_mechanisms([m for m in model.mechanisms if m.id not in timed])
+    say(f"{', '.join(timed)} named: checking an asymmetric lag on the force path beyond the catalog in its place")
+    fit = fit_asymmetric_lag(base, campaign, np.asarray(data.train_mask, bool), group_delay_s(stand_in),
+                             noise_sigma_nm=sigma_nm)
+    ta, tr = float(fit.parameters["tau_apply_s"]), float(fit.parameters["tau_release_s"])
+    ratio = max(ta, tr) / min(ta, tr)
+    what = f"asymmetric lag on the force path ({1e3 * ta:.3g} ms applying, {1e3 * tr:.3g} ms releasing)"
+    out, found = _rival_in_place(data, sel, base, stand_in, fit, what, "asymmetric_lag", alpha, min_gain_frac,
+                                 say, "the force path lags the force one way on applying, another on releasing")
+    found["asymmetry_ratio"] = float(ratio)
+    if ratio < ASYMMETRY_MIN_RATIO:
+        if found["took_the_name"]:
+            say(f"the two time constants are within {ASYMMETRY_MIN_RATIO:g}x of each other "
+                f"(ratio {ratio:.2f}): the catalog's one lag, not taken")
+        found["took_the_name"] = False
+        return sel, found
+    return out, found
+
+
 # -- a play of constant width: the rival beyond the catalog of a named actuator_hysteresis -------
 
 PLAY_BOUNDS_N = (1.0, 5000.0)

@@ -57,7 +57,13 @@ Effects outside the catalog (``effects``: [{"name": ..., parameter: value}]):
                                      gets the logged force + offset_n (a zero or calibration
                                      error); read high it would be the catalog's spring_preload,
                                      read low it is no catalog mechanism (a force-path effect)
-Plant effects (the last three) run in ``_trajectory_friction_factor``, the kernels' own step
+  actuator_asymmetric_lag  tau_release_s  the pack force follows the measured force through
+                         (tau_apply_s  a first-order lag of time constant tau_apply_s while the
+                          0.04)        force rises and tau_release_s while it falls (a hydraulic
+                                     actuator filled by a pump, drained through an orifice);
+                                     mimics actuator_lag, which has one time constant (a
+                                     force-path effect)
+Friction effects (slip_power_fade, pressure_temperature_cross, run_friction_level) run in ``_trajectory_friction_factor``, the kernels' own step
 functions with the friction factor written through the degradation slot each row (so the
 factor heats the pack like any friction); measurement effects post-process the fine grid.
 """
@@ -120,6 +126,12 @@ EFFECTS = {
                             "mimics": "spring_preload", "catalog_equivalent": None,
                             "physics": "the force sensor reads offset_n low: the pack gets the "
                                        "logged force + offset_n"},
+    "actuator_asymmetric_lag": {"kind": "force-path", "parameters": {"tau_release_s": 0.2, "tau_apply_s": 0.04},
+                                "mimics": "actuator_lag", "catalog_equivalent": None,
+                                "physics": "the pack force follows the measured force through a "
+                                           "first-order lag of time constant tau_apply_s while it "
+                                           "rises and tau_release_s while it falls (pump-filled, "
+                                           "orifice-drained actuator)"},
 }
 
 DEFAULT_CLOCKS = {
@@ -489,6 +501,22 @@ def _played(force, run_start, half_width_n):
     return out
 
 
+@njit(cache=True)
+def _asymmetric_lagged(force, run_start, tau_apply_steps, tau_release_steps):
+    """The force each fine row reaches through a first-order lag of ``tau_apply_steps`` fine
+    rows while it rises toward the request and ``tau_release_steps`` while it falls (exact for
+    a request held over each row; restarted at the request at each run's start)."""
+    out = np.empty_like(force)
+    a_up, a_down = 1.0 - math.exp(-1.0 / tau_apply_steps), 1.0 - math.exp(-1.0 / tau_release_steps)
+    for k in range(force.size):
+        if k == 0 or run_start[k]:
+            out[k] = force[k]
+        else:
+            d = force[k] - out[k - 1]
+            out[k] = out[k - 1] + (a_up if d > 0.0 else a_down) * d
+    return out
+
+
 def _second_order_per_run(force, run_start, f_n_hz, damping, dt_s):
     """The force each fine row reaches through a unit-gain second-order response (natural
     frequency ``f_n_hz``, damping ratio ``damping``; exact zero-order-hold discretisation),
@@ -566,6 +594,10 @@ def synthesize_car_logs(spec: CarLogSpec | None = None, base_model: ClutchModel 
     backlash = spec.effect_values("actuator_backlash")
     if backlash is not None:
         force_pack = _played(force_pack, run_start, float(backlash["half_width_n"]))
+    asym = spec.effect_values("actuator_asymmetric_lag")
+    if asym is not None:
+        force_pack = _asymmetric_lagged(force_pack, run_start, float(asym["tau_apply_s"]) * spec.fine_rate_hz,
+                                        float(asym["tau_release_s"]) * spec.fine_rate_hz)
     reads_low = spec.effect_values("force_sensor_offset")
     if reads_low is not None:
         force_pack = force_pack + float(reads_low["offset_n"])

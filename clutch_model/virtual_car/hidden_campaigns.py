@@ -131,7 +131,8 @@ EFFECT_RANGES = {"torque_sensor_lowpass": ("tau_s", (0.02, 0.15)),
                  "actuator_rate_limit": ("rate_n_per_s", (2.0e4, 6.0e4)),
                  "actuator_second_order": ("f_n_hz", (1.5, 4.0)),
                  "actuator_backlash": ("half_width_n", (150.0, 500.0)),
-                 "force_sensor_offset": ("offset_n", (300.0, 800.0))}
+                 "force_sensor_offset": ("offset_n", (300.0, 800.0)),
+                 "actuator_asymmetric_lag": ("tau_release_s", (0.12, 0.3))}
 
 
 @dataclass(frozen=True)
@@ -153,7 +154,8 @@ def _cases() -> dict:
     out += [Case(e, "lookalike" if EFFECTS[e]["mimics"] else "outside", effects=(e,))
             for e in ("torque_sensor_lowpass", "slip_power_fade", "run_friction_level",
                       "torque_ripple", "pressure_temperature_cross", "actuator_rate_limit",
-                      "actuator_second_order", "actuator_backlash", "force_sensor_offset")]
+                      "actuator_second_order", "actuator_backlash", "force_sensor_offset",
+                      "actuator_asymmetric_lag")]
     return {c.name: c for c in out}
 
 

@@ -1,12 +1,13 @@
 """The force paths beyond the catalog (clutch_model/diagnosis/force_dynamics.py): the
-second-order force path, the rival of a named time mechanism, and the play of constant width,
-the rival of a named hysteresis band."""
+second-order force path and the asymmetric lag, the rivals of a named time mechanism, the
+play of constant width, the rival of a named hysteresis band, and the force offset."""
 import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from clutch_model.diagnosis.force_dynamics import (group_delay_s, offset_force, play_starts_n, played_force,
-                                                   second_order_force, time_mechanism_ids)
+from clutch_model.diagnosis.force_dynamics import (asymmetric_lagged_force, group_delay_s, offset_force,
+                                                   play_starts_n, played_force, second_order_force,
+                                                   time_mechanism_ids)
 from clutch_model.plant.mechanisms import make_mechanism
 from clutch_model.virtual_car.signals import AR1Noise
 
@@ -45,6 +46,44 @@ def test_second_order_force_restarts_each_run_and_keeps_a_held_force():
     assert got[999] == pytest.approx(6000.0, rel=1e-6)       # unit gain once settled
     peak = got[200:1000].max()                               # damping 0.7: 4.6 % overshoot of the step
     assert (peak - 6000.0) / 3000.0 == pytest.approx(np.exp(-np.pi * 0.7 / np.sqrt(1 - 0.49)), rel=0.02)
+
+
+@pytest.mark.parametrize("tau_apply,tau_release", [(0.04, 0.25), (0.2, 0.02), (0.06, 0.06)])
+def test_asymmetric_lag_matches_solve_ivp_on_jittered_rows(tau_apply, tau_release):
+    """x' = (F - x) / tau, tau = tau_apply while F > x, tau_release while F < x, F linear
+    between rows: solve_ivp (tight tolerance, steps no longer than the rows' and the events of
+    F crossing x resolved by the small step) against the kernel's exact substeps."""
+    rng = np.random.default_rng(5)
+    t = np.cumsum(rng.uniform(0.004, 0.016, 600))
+    force = 2000 + 1500 * np.sin(2 * np.pi * 0.7 * t) + 800 * (np.sin(2 * np.pi * 0.23 * t) > 0)
+    run_start = np.zeros(t.size, bool)
+    run_start[0] = True
+
+    def rhs(tt, x):
+        d = np.interp(tt, t, force) - x[0]
+        return [d / (tau_apply if d > 0 else tau_release)]
+    ref = solve_ivp(rhs, (t[0], t[-1]), [force[0]], t_eval=t, rtol=1e-10, atol=1e-6, method="LSODA",
+                    max_step=2e-4).y[0]
+    got = asymmetric_lagged_force(t, force, run_start, tau_apply, tau_release)
+    # each 0.5 ms substep exact for the linear input; only the switch of tau inside one is not
+    np.testing.assert_allclose(got, ref, rtol=0, atol=1e-4 * np.ptp(force))
+    if tau_apply == tau_release:       # one time constant: the symmetric lag
+        sym = asymmetric_lagged_force(t, force, run_start, 0.06, 0.06)
+        np.testing.assert_array_equal(got, sym)
+
+
+def test_asymmetric_lag_restarts_each_run_and_settles_at_the_force():
+    t = np.r_[np.arange(0, 3, 0.005), np.arange(0, 3, 0.005)]
+    force = np.r_[np.full(600, 4000.0), np.full(600, 800.0)]
+    force[100:300] = 1000.0                                  # a release, then a re-apply
+    run_start = np.zeros(t.size, bool)
+    run_start[[0, 600]] = True
+    got = asymmetric_lagged_force(t, force, run_start, 0.02, 0.3)
+    np.testing.assert_allclose(got[600:], 800.0)             # the second run starts from its own force
+    # 0.2 s into the release (tau 0.3 s): 1000 + 3000 exp(-0.2 / 0.3), the input a ramp over one row
+    assert got[140] == pytest.approx(1000 + 3000 * np.exp(-(t[140] - t[100]) / 0.3), rel=0.01)
+    # re-applied (tau 20 ms): settled at the force within 0.2 s
+    assert got[340] == pytest.approx(4000.0, abs=5.0)
 
 
 def test_time_mechanisms_and_their_group_delay():

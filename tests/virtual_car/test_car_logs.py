@@ -304,6 +304,38 @@ def test_force_sensor_offset_drives_the_plant_with_more_force_than_logged():
     assert on.spec.expected_cause == "unexplained"
 
 
+def test_actuator_asymmetric_lag_applies_and_releases_at_their_own_time_constants():
+    """actuator_asymmetric_lag: the plant sees the request through x' = (F - x) / tau, tau the
+    apply constant while x rises toward F and the release constant while it falls (the
+    request held over each fine step). The reference is solve_ivp (tight tolerance) step by
+    step, each step's tau chosen by the sign of F - x at its start (x never crosses a held F)."""
+    from scipy.integrate import solve_ivp
+    from clutch_model.virtual_car.car_logs import CarLogSpec, synthesize_car_logs
+    ta, tr = 0.03, 0.21
+    base = synthesize_car_logs(CarLogSpec(seed=2, n_runs=1))
+    on = synthesize_car_logs(CarLogSpec(seed=2, n_runs=1, effects=[{"name": "actuator_asymmetric_lag",
+                                                                    "tau_release_s": tr, "tau_apply_s": ta}]))
+    fb, fo = base.runs[0].fine, on.runs[0].fine
+    np.testing.assert_array_equal(fo["applied_force_n"], fb["applied_force_n"])
+    t, request = fb["t_s"], fb["applied_force_n"]
+    pack = np.empty_like(request)
+    pack[0] = request[0]
+    for k in range(1, request.size):
+        tau = ta if request[k] > pack[k - 1] else tr
+        pack[k] = solve_ivp(lambda _t, x: (request[k] - x) / tau, (t[k - 1], t[k]), [pack[k - 1]],
+                            rtol=1e-11, atol=1e-9).y[0, -1]
+    rising, falling = np.diff(request) > 1.0, np.diff(request) < -1.0
+    assert rising.any() and falling.any()
+    # slow release: the pack force trails a falling request far more than a rising one
+    lag = request - pack
+    assert np.mean(-lag[1:][falling]) > 3 * np.mean(lag[1:][rising])
+    _assert_plant_driven_by(pack, on, base, rtol=1e-6, atol=1e-3, min_change_rms_nm=5.0)
+    truth = on.truth["effects"][0]
+    assert truth["name"] == "actuator_asymmetric_lag"
+    assert truth["parameters"] == {"tau_release_s": tr, "tau_apply_s": ta}
+    assert truth["mimics"] == "actuator_lag" and on.spec.expected_cause == "unexplained"
+
+
 def test_cli_car_logs(tmp_path):
     from clutch_sim.cli import main
     out = tmp_path / "c"
