@@ -414,9 +414,9 @@ def test_time_parameter_below_the_rows_resolution_is_not_named():
 
 
 @pytest.mark.parametrize("noise_n", [5.0, 20.0, 60.0])
-def test_hysteresis_band_within_the_force_noise_is_not_named(noise_n):
+def test_hysteresis_band_and_preload_within_the_force_noise_are_not_named(noise_n):
     """A hysteresis band (ratio x the typical force) narrower than twice the force sensor's
-    noise is below the force's resolution: the force noise is estimated from each run's own
+    noise, and a preload smaller, are below the force's resolution: the force noise is estimated from each run's own
     force samples (white noise of sd noise_n on a smooth profile: within 10 %)."""
     from types import SimpleNamespace
 
@@ -446,7 +446,11 @@ def test_hysteresis_band_within_the_force_noise_is_not_named(noise_n):
     assert "below the force's resolution" in fit("actuator_hysteresis", ratio=0.7 * edge).below_resolution
     assert fit("actuator_hysteresis", ratio=1.4 * edge).below_resolution is None
     assert fit("actuator_hysteresis", ratio=0.05).below_resolution is None      # a real play: 150 N
-    assert fit("spring_preload", preload_n=1.0).below_resolution is None        # no band on the force
+    # a preload (a constant on the force) within the same bound clips the force noise about zero
+    limit_n = FORCE_BAND_NOISE_FACTOR * noise_n
+    assert "below the force's resolution" in fit("spring_preload", preload_n=0.7 * limit_n).below_resolution
+    assert fit("spring_preload", preload_n=1.4 * limit_n).below_resolution is None
+    assert fit("spring_preload", preload_n=300.0).below_resolution is None      # the catalog's smallest
 
 
 def test_offset_within_the_residuals_slow_wander_is_not_named():

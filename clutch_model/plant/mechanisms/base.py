@@ -103,6 +103,8 @@ class Mechanism:
     state_keys = ()                # non-fitted entries carried in the model file (campaign state)
     force_band = None              # parameter that is a band on the force as a share of it (a play
                                    # operator's half-width): resolved only when wider than the force noise
+    force_level = None             # parameter that is a constant on the force (N, a preload): resolved
+                                   # only when larger than the force noise
     torque_level = None            # parameter that is a constant torque on the measurement (a sensor
                                    # bias): resolved only when it stands out of the residual's slow wander
 

@@ -12,6 +12,7 @@ class SpringPreload(Mechanism):
     physics = "return springs: pack force = max(F - preload, 0)"
     virtual_car = VirtualCarRange(visible=(300.0, 1500.0), default=800.0)
     kernel_slot = layout.PRELOAD_N
+    force_level = "preload_n"
 
     @classmethod
     def search_space(cls, scale):
