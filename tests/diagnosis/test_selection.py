@@ -453,6 +453,31 @@ def test_hysteresis_band_and_preload_within_the_force_noise_are_not_named(noise_
     assert fit("spring_preload", preload_n=300.0).below_resolution is None      # the catalog's smallest
 
 
+def test_friction_degradation_taking_too_little_of_the_friction_is_not_named():
+    """A degradation that takes less than MIN_FRICTION_DROP of the friction over the campaign's
+    dissipated energy is below the friction level's resolution; one taking the virtual car's
+    smallest (6 %) is not."""
+    from clutch_model.diagnosis.candidates import MIN_FRICTION_DROP, CampaignContext, ModelFit
+    from clutch_model.diagnosis.fitting import CandidateFit
+
+    class Rows:
+        t = np.arange(0, 1, 0.005)
+        run_start = np.r_[True, np.zeros(199, bool)]
+
+    energy = 2.0e5
+    ctx = CampaignContext(Rows(), energy, 100.0, 8.0)
+
+    def fit(scale):
+        return ModelFit("friction_degradation", CandidateFit("friction_degradation", None,
+                                                             {"energy_scale_j": scale}, np.zeros(10), 1.0),
+                        None, ctx, np.ones(200, bool))
+
+    at_limit = -energy / np.log1p(-MIN_FRICTION_DROP)        # the scale that takes exactly the limit
+    assert "friction level's resolution" in fit(1.5 * at_limit).below_resolution
+    assert fit(0.7 * at_limit).below_resolution is None
+    assert fit(-energy / np.log(1 - 0.06)).below_resolution is None
+
+
 def test_offset_within_the_residuals_slow_wander_is_not_named():
     """A torque offset is told from a slowly drifting sensor only when it stands out of the
     residual's wander (LEVEL_WANDER_FACTOR x the RMS of its LEVEL_BLOCK_S means): on one 60 s

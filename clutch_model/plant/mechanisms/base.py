@@ -105,6 +105,8 @@ class Mechanism:
                                    # operator's half-width): resolved only when wider than the force noise
     force_level = None             # parameter that is a constant on the force (N, a preload): resolved
                                    # only when larger than the force noise
+    friction_decay = None          # parameter that is the energy per e-fold of the friction (J): resolved
+                                   # only when the friction it takes over the campaign is a few per cent
     torque_level = None            # parameter that is a constant torque on the measurement (a sensor
                                    # bias): resolved only when it stands out of the residual's slow wander
 

@@ -21,6 +21,7 @@ class FrictionDegradation(Mechanism):
     # the virtual car sets energy_scale_j from the campaign's energy (a fixed drop of mu_f)
     virtual_car = VirtualCarRange(visible=None, default=None)
     kernel_slot = layout.ENERGY_SCALE_J
+    friction_decay = "energy_scale_j"
 
     @classmethod
     def search_space(cls, scale):
