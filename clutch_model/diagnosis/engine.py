@@ -39,10 +39,10 @@ from clutch_model.diagnosis.candidates import CampaignContext, MechanismCandidat
 from clutch_model.diagnosis.input_hold import decide_input_noise, with_midpoint_force, with_smoothed_slip
 from clutch_model.diagnosis.lockup import without_locked_torque
 from clutch_model.diagnosis.run_level import within_run_forecast
-from clutch_model.diagnosis.force_dynamics import (named_or_asymmetric_lag, named_or_constant_play,
-                                                   named_or_force_dynamics,
+from clutch_model.diagnosis.force_dynamics import (named_or_constant_play, named_or_force_dynamics,
                                                    named_or_force_offset, none_or_constant_play,
                                                    none_or_force_offset, none_or_rate_limit)
+from clutch_model.diagnosis.lag_rivals import named_or_varying_lag
 from clutch_model.diagnosis.bench_anchor import named_and_bench_anchored, none_or_bench_anchored
 from clutch_model.diagnosis.fitting import CANDIDATE_IDS, CandidateFit, fit_candidate
 from clutch_model.diagnosis.friction_ridge import held_to_the_data
@@ -184,7 +184,7 @@ class Diagnosis:
     inputs: dict = field(default_factory=dict)  # the inputs' noise: slip smoothed, noise floor (input_hold.InputNoise)
     force_band_check: dict | None = None  # a named hysteresis against a constant-width play (force_dynamics.py)
     force_offset_check: dict | None = None  # the named causes against a force-sensor offset (force_dynamics.py)
-    asymmetric_lag_check: dict | None = None  # a named time mechanism against an asymmetric lag (force_dynamics.py)
+    lag_rival_checks: dict | None = None  # a named time mechanism against lags of two constants (lag_rivals.py)
     force_path_check: dict | None = None  # a force path beyond the catalog (force_dynamics.py): second-order
     #                                       against a named time mechanism, rate-limited where nothing is named
     bench_anchor: dict | None = None      # nothing named: a cause the calibration absorbed (bench_anchor.py)
@@ -596,8 +596,8 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
     # a named time mechanism against a force path beyond the catalog (force_dynamics.py)
     t0 = time.perf_counter()
     sel, force_dynamics = named_or_force_dynamics(data, sel, campaign, sigma_guess, ALPHA, NAMED_GAIN_FRAC, say)
-    # and against an asymmetric lag (applying and releasing at different time constants)
-    sel, asymmetric_lag = named_or_asymmetric_lag(data, sel, campaign, sigma_guess, ALPHA, NAMED_GAIN_FRAC, say)
+    # and against lags whose time constant is not one (lag_rivals.py)
+    sel, lag_rivals = named_or_varying_lag(data, sel, campaign, sigma_guess, ALPHA, NAMED_GAIN_FRAC, say)
     # a named hysteresis band against a play of constant width (force_dynamics.py)
     sel, force_band = named_or_constant_play(data, sel, campaign, sigma_guess, ALPHA, NAMED_GAIN_FRAC, say)
     # the named causes against an offset on the measured force (force_dynamics.py)
@@ -738,7 +738,7 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
                   noise=noise, bench_info=bench_info or {}, calibration_info=calibration_info, timings=timings,
                   discovery=discovery, diagnosis_rate=diagnosis_rate, diagnosis_sample=sample_info,
                   inputs=inputs, force_path_check=force_dynamics, force_band_check=force_band,
-                  asymmetric_lag_check=asymmetric_lag,
+                  lag_rival_checks=lag_rivals,
                   force_offset_check=force_offset,
                   bench_anchor=bench_anchor, ridged_selection=ridged.to_json() if ridged else None)
     emit("selected", diagnosis=d)

@@ -94,7 +94,7 @@ def report_dict(d: Diagnosis) -> dict:
                       "closest": sel.closest if sel else [], "closest_leaves": sel.closest_leaves if sel else {},
                       "run_level": sel.run_level.as_dict() if sel and sel.run_level is not None else None,
                       "force_path_check": d.force_path_check,
-                      "asymmetric_lag_check": d.asymmetric_lag_check,
+                      "lag_rival_checks": d.lag_rival_checks,
                       "force_band_check": d.force_band_check,
                       "force_offset_check": d.force_offset_check,
                       "bench_anchor": d.bench_anchor,

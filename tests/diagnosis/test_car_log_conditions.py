@@ -290,13 +290,13 @@ def test_a_force_sensor_offset_is_not_named_a_catalog_mechanism(tmp_path):
 # releasing) is outside the catalog, whose lags have one time constant: over one 40 s drive the
 # catalog named torque_sensor_lag (a wrong name, +52 % on the unseen bag; also on ar1#1, car#1,
 # and actuator_lag on unaligned#1 of the matrix) until a named time mechanism had to beat an
-# asymmetric lag on the force path fitted in its place (diagnosis/force_dynamics.py).
+# asymmetric lag on the force path fitted in its place (diagnosis/lag_rivals.py).
 def test_an_asymmetric_actuator_lag_is_not_named_a_catalog_time_mechanism(tmp_path):
     tau_release = 0.23860788602090102
     res, what = _diagnosed(tmp_path, "actuator_asymmetric_lag", "long_drive", 1,
                            {"actuator_asymmetric_lag": tau_release})
     assert res.verdict == "unexplained", what
-    check = res.report["selection"]["asymmetric_lag_check"]
+    check = res.report["selection"]["lag_rival_checks"]["asymmetric_lag"]
     assert check["took_the_name"] and check["in_place_of"], check
     # the rival recovers both time constants (the apply one is the effect's default, 40 ms)
     assert check["parameters"]["tau_apply_s"] == pytest.approx(0.04, rel=0.2), check

@@ -5,9 +5,10 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from clutch_model.diagnosis.force_dynamics import (asymmetric_lagged_force, group_delay_s, offset_force,
-                                                   play_starts_n, played_force, second_order_force,
-                                                   time_mechanism_ids)
+from clutch_model.diagnosis.force_dynamics import (group_delay_s, offset_force, play_starts_n, played_force,
+                                                   second_order_force, time_mechanism_ids)
+from clutch_model.diagnosis.lag_rivals import (asymmetric_lagged_force, asymmetric_lagged_torque,
+                                               force_dependent_lagged_force)
 from clutch_model.plant.mechanisms import make_mechanism
 from clutch_model.virtual_car.signals import AR1Noise
 
@@ -70,6 +71,54 @@ def test_asymmetric_lag_matches_solve_ivp_on_jittered_rows(tau_apply, tau_releas
     if tau_apply == tau_release:       # one time constant: the symmetric lag
         sym = asymmetric_lagged_force(t, force, run_start, 0.06, 0.06)
         np.testing.assert_array_equal(got, sym)
+
+
+@pytest.mark.parametrize("tau_low,tau_high", [(0.01, 0.25), (0.2, 0.03)])
+def test_force_dependent_lag_matches_solve_ivp_on_jittered_rows(tau_low, tau_high):
+    """x' = (F - x) / tau(x), tau linear in x between f_low and f_high and constant beyond, F
+    linear between rows: solve_ivp (tight tolerance) against the kernel's substeps (the
+    constant held over each 0.5 ms substep at its middle's x)."""
+    rng = np.random.default_rng(9)
+    t = np.cumsum(rng.uniform(0.004, 0.016, 600))
+    force = 2500 + 2000 * np.sin(2 * np.pi * 0.7 * t) + 800 * (np.sin(2 * np.pi * 0.23 * t) > 0)
+    run_start = np.zeros(t.size, bool)
+    run_start[0] = True
+    f_low, f_high = 1000.0, 4500.0
+
+    def tau(x):
+        return tau_low + (tau_high - tau_low) * min(max((x - f_low) / (f_high - f_low), 0.0), 1.0)
+
+    ref = solve_ivp(lambda tt, x: [(np.interp(tt, t, force) - x[0]) / tau(x[0])], (t[0], t[-1]), [force[0]],
+                    t_eval=t, rtol=1e-10, atol=1e-6, method="LSODA", max_step=2e-4).y[0]
+    got = force_dependent_lagged_force(t, force, run_start, tau_low, tau_high, f_low, f_high)
+    np.testing.assert_allclose(got, ref, rtol=0, atol=3e-4 * np.ptp(force))
+    # equal constants: the catalog's one lag, whatever the force
+    one = force_dependent_lagged_force(t, force, run_start, 0.08, 0.08, f_low, f_high)
+    np.testing.assert_allclose(one, asymmetric_lagged_force(t, force, run_start, 0.08, 0.08), rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize("tau_rise,tau_fall", [(0.015, 0.15), (0.12, 0.02)])
+def test_asymmetric_sensor_lag_matches_solve_ivp_through_a_sign_change(tau_rise, tau_fall):
+    """y' = (T - y) / tau, tau = tau_rise while (T - y) T > 0 (the reading moves away from zero
+    toward the torque), tau_fall otherwise, on a torque that changes sign (slip reversals):
+    solve_ivp against the kernel; a NaN row (a locked one) is held through."""
+    rng = np.random.default_rng(11)
+    t = np.cumsum(rng.uniform(0.004, 0.016, 600))
+    torque = 250 * np.sin(2 * np.pi * 0.4 * t) + 120 * (np.sin(2 * np.pi * 1.3 * t) > 0)
+    run_start = np.zeros(t.size, bool)
+    run_start[0] = True
+
+    def rhs(tt, y):
+        u = np.interp(tt, t, torque)
+        return [(u - y[0]) / (tau_rise if (u - y[0]) * u > 0 else tau_fall)]
+    ref = solve_ivp(rhs, (t[0], t[-1]), [torque[0]], t_eval=t, rtol=1e-10, atol=1e-6, method="LSODA",
+                    max_step=2e-4).y[0]
+    got = asymmetric_lagged_torque(t, torque, run_start, tau_rise, tau_fall)
+    np.testing.assert_allclose(got, ref, rtol=0, atol=2e-4 * np.ptp(torque))
+    with_gap = torque.copy()
+    with_gap[300] = np.nan
+    held = asymmetric_lagged_torque(t, with_gap, run_start, tau_rise, tau_fall)
+    assert np.isfinite(held).all() and held[300] == held[299]
 
 
 def test_asymmetric_lag_restarts_each_run_and_settles_at_the_force():

@@ -1,0 +1,284 @@
+"""Lags whose time constant is not one: the rivals beyond the catalog of a named time mechanism.
+
+The catalog's lags (``actuator_lag`` on the force path, ``torque_sensor_lag`` on the
+measurement) each have one time constant. Real actuators and sensors often have two or more:
+
+- a hydraulic actuator filled by a pump and drained through an orifice applies at one time
+  constant and releases at another (``asymmetric_lag``, on the force path);
+- a valve or motor whose response slows with the load lags more at high force than at low
+  (``force_dependent_lag``, on the force path: the time constant linear in the pack force
+  between the training forces' 10th and 90th percentiles, constant beyond);
+- a sensor or bus filter that tracks a growing torque faster than a falling one, or the
+  reverse (``asymmetric_sensor_lag``, on the measurement: one time constant while the
+  reading's magnitude grows, another while it shrinks).
+
+The one time constant fitted to any of them is too slow on one side and too fast on the other,
+and what it leaves can read as noise (coloured noise forecasts part of it). So when a time
+mechanism is named, each rival in turn takes the named time mechanisms' place on the final
+model (its friction correction refitted with it, the other named causes kept) and meets the
+named model head to head on the held-out rows as the second-order force path does
+(``force_dynamics._rival_in_place``): a rival taking the name turns the answer
+``unexplained``, the named causes the closest. Each rival has the catalog's lag as its special
+case (two equal time constants), so on a true catalog lag it can only tie; two time constants
+within ASYMMETRY_MIN_RATIO of each other are the catalog's one lag and never take the name.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from clutch_model.diagnosis.fitting import time_mechanism_ids
+from clutch_model.diagnosis.force_dynamics import (MAX_SUBSTEP_S, ForcePathObjective, _fit_from_best_start,
+                                                   _rival_in_place, group_delay_s)
+from clutch_model.plant.mechanisms import ParamSpec
+from clutch_model.plant.params import ClutchModel
+from clutch_model.prediction import predict_campaign
+
+LAG_BOUNDS_S = (2e-3, 2.0)
+LAG_START_RATIOS = (1 / 8, 1 / 3, 1.0, 3.0, 8.0)   # the second time constant over the first, about the named delay
+ASYMMETRY_MIN_RATIO = 1.5   # two time constants closer than this are the catalog's one lag
+FORCE_LEVEL_QUANTILES = (0.1, 0.9)   # the forces between which the force-dependent lag's constant moves
+
+
+@njit(cache=True)
+def _lag_step(x, fa, slope, h, tau):
+    """x after h s of tau x' = fa + slope s - x (the input linear over the step), exactly."""
+    return fa + slope * h - slope * tau + (x - fa + slope * tau) * math.exp(-h / tau)
+
+
+@njit(cache=True)
+def asymmetric_lagged_force(t, force, run_start, tau_apply_s, tau_release_s, max_substep_s=MAX_SUBSTEP_S):
+    """The force through a first-order lag of time constant ``tau_apply_s`` while it rises
+    toward the input and ``tau_release_s`` while it falls, on the rows ``t`` (s), each run from
+    its first force. The input is linear between rows; each substep of at most
+    ``max_substep_s`` is the exact response to it at the time constant the sign of input - x
+    at the substep's middle chooses (only a crossing inside a substep is approximated)."""
+    n = force.size
+    out = np.empty(n)
+    x = 0.0
+    for k in range(n):
+        if k == 0 or run_start[k]:
+            x = force[k]
+            out[k] = x
+            continue
+        dt = t[k] - t[k - 1]
+        if not dt > 0.0:
+            out[k] = x
+            continue
+        m = int(math.ceil(dt / max_substep_s))
+        h = dt / m
+        f0, f1 = force[k - 1], force[k]
+        slope = (f1 - f0) / dt
+        for j in range(m):
+            fa = f0 + (f1 - f0) * (j / m)
+            tau = tau_apply_s if fa + 0.5 * h * slope > x else tau_release_s
+            x = _lag_step(x, fa, slope, h, tau)
+        out[k] = x
+    return out
+
+
+@njit(cache=True)
+def force_dependent_lagged_force(t, force, run_start, tau_low_s, tau_high_s, f_low_n, f_high_n,
+                                 max_substep_s=MAX_SUBSTEP_S):
+    """The force through a first-order lag whose time constant is ``tau_low_s`` at a pack force
+    of ``f_low_n`` or less, ``tau_high_s`` at ``f_high_n`` or more and linear between, on the
+    rows ``t`` (s), each run from its first force; each substep exact for the input linear over
+    it at the constant of the state's value at the substep's middle (a predictor half step)."""
+    n = force.size
+    out = np.empty(n)
+    x = 0.0
+    span = max(f_high_n - f_low_n, 1e-9)
+    for k in range(n):
+        if k == 0 or run_start[k]:
+            x = force[k]
+            out[k] = x
+            continue
+        dt = t[k] - t[k - 1]
+        if not dt > 0.0:
+            out[k] = x
+            continue
+        m = int(math.ceil(dt / max_substep_s))
+        h = dt / m
+        f0, f1 = force[k - 1], force[k]
+        slope = (f1 - f0) / dt
+        for j in range(m):
+            fa = f0 + (f1 - f0) * (j / m)
+            # the constant at the state's midpoint value (a predictor half step): second order
+            share = min(max((x - f_low_n) / span, 0.0), 1.0)
+            half = _lag_step(x, fa, slope, 0.5 * h, tau_low_s + (tau_high_s - tau_low_s) * share)
+            share = min(max((half - f_low_n) / span, 0.0), 1.0)
+            x = _lag_step(x, fa, slope, h, tau_low_s + (tau_high_s - tau_low_s) * share)
+        out[k] = x
+    return out
+
+
+@njit(cache=True)
+def asymmetric_lagged_torque(t, torque, run_start, tau_rise_s, tau_fall_s, max_substep_s=MAX_SUBSTEP_S):
+    """The torque through a first-order lag of time constant ``tau_rise_s`` while the reading
+    moves away from zero toward the input ((T - y) T > 0: the magnitude grows, or the reading
+    crosses to the input's sign) and ``tau_fall_s`` while it moves toward zero, on the rows
+    ``t`` (s), each run from its first torque (NaN rows held through); each substep exact for
+    the input linear over it."""
+    n = torque.size
+    out = np.empty(n)
+    y = 0.0
+    for k in range(n):
+        if k == 0 or run_start[k] or not math.isfinite(y):
+            y = torque[k]
+            out[k] = y
+            continue
+        dt = t[k] - t[k - 1]
+        u0, u1 = torque[k - 1], torque[k]
+        if not (dt > 0.0 and math.isfinite(u0) and math.isfinite(u1)):
+            out[k] = y
+            continue
+        m = int(math.ceil(dt / max_substep_s))
+        h = dt / m
+        slope = (u1 - u0) / dt
+        for j in range(m):
+            ua = u0 + (u1 - u0) * (j / m)
+            ub = ua + h * slope
+            # the input crossing zero inside the substep switches the side there: split it
+            cut = -ua / slope if ua * ub < 0.0 else h
+            um = ua + 0.5 * cut * slope
+            y = _lag_step(y, ua, slope, cut, tau_rise_s if (um - y) * um > 0.0 else tau_fall_s)
+            if cut < h:
+                um = 0.5 * (ub + 0.0)
+                y = _lag_step(y, 0.0, slope, h - cut, tau_rise_s if (um - y) * um > 0.0 else tau_fall_s)
+        out[k] = y
+    return out
+
+
+def _two_constants(first: str, second: str, delay_s: float) -> list:
+    d = float(np.clip(delay_s, *LAG_BOUNDS_S))
+    return [ParamSpec(first, True, LAG_BOUNDS_S[0], LAG_BOUNDS_S[1], np.array([d])),
+            ParamSpec(second, True, LAG_BOUNDS_S[0], LAG_BOUNDS_S[1], np.array([d]))]
+
+
+def _starts(delay_s: float) -> list:
+    """Pairs whose geometric mean is the named delay and whose ratio is one of LAG_START_RATIOS."""
+    d = float(np.clip(delay_s, 5e-3, 0.5))
+    return [[math.log(d / math.sqrt(r)), math.log(d * math.sqrt(r))] for r in LAG_START_RATIOS]
+
+
+class AsymmetricLagObjective(ForcePathObjective):
+    """The asymmetric lag on the force path: x = [log tau_apply, log tau_release] then the
+    friction correction."""
+
+    def __init__(self, base: ClutchModel, campaign, fit_mask, delay_s: float, noise_sigma_nm: float = 1.0):
+        super().__init__(base, campaign, fit_mask, _two_constants("tau_apply_s", "tau_release_s", delay_s),
+                         noise_sigma_nm=noise_sigma_nm)
+
+    def path_force(self, values) -> np.ndarray:
+        pi = self._plant_inputs
+        return asymmetric_lagged_force(pi.t, pi.force, pi.run_start, values[0], values[1])
+
+
+class ForceDependentLagObjective(ForcePathObjective):
+    """The force-dependent lag on the force path: x = [log tau_low, log tau_high] then the
+    friction correction; the constant moves between the training forces' FORCE_LEVEL_QUANTILES."""
+
+    def __init__(self, base: ClutchModel, campaign, fit_mask, delay_s: float, noise_sigma_nm: float = 1.0):
+        f = np.asarray(campaign.force, float)[np.asarray(fit_mask, bool)]
+        f = f[np.isfinite(f) & (f > 0)]
+        self.f_low_n, self.f_high_n = (float(v) for v in (np.quantile(f, FORCE_LEVEL_QUANTILES)
+                                                          if f.size else (0.0, 1.0)))
+        super().__init__(base, campaign, fit_mask, _two_constants("tau_low_s", "tau_high_s", delay_s),
+                         noise_sigma_nm=noise_sigma_nm)
+
+    def path_force(self, values) -> np.ndarray:
+        pi = self._plant_inputs
+        return force_dependent_lagged_force(pi.t, pi.force, pi.run_start, values[0], values[1],
+                                            self.f_low_n, self.f_high_n)
+
+
+class AsymmetricSensorLagObjective(ForcePathObjective):
+    """The asymmetric lag on the measurement: x = [log tau_rise, log tau_fall] then the
+    friction correction; the plant is the base model's, its reading lagged."""
+
+    def __init__(self, base: ClutchModel, campaign, fit_mask, delay_s: float, noise_sigma_nm: float = 1.0):
+        super().__init__(base, campaign, fit_mask, _two_constants("tau_rise_s", "tau_fall_s", delay_s),
+                         noise_sigma_nm=noise_sigma_nm)
+
+    def _predict_xs(self, xs) -> np.ndarray:
+        """One plant simulation per friction correction: the columns of a Jacobian that differ
+        only in the sensor's constants share it."""
+        pi = self._plant_inputs
+        xs = np.atleast_2d(np.asarray(xs, float))
+        out = np.empty((xs.shape[0], pi.n_rows))
+        groups: dict = {}
+        for k, x in enumerate(xs):
+            groups.setdefault(tuple(float(v) for v in x[self.n_mech:]), []).append(k)
+        for rows in groups.values():
+            plant = predict_campaign([self.model_at(xs[rows[0]])], pi, energy0_j=0.0).torque_nm[0]
+            for k in rows:
+                tau = [s.from_x(v) for s, v in zip(self.specs, xs[k, :self.n_mech])]
+                out[k] = asymmetric_lagged_torque(pi.t, plant, pi.run_start, tau[0], tau[1])
+        return out
+
+
+@dataclass(frozen=True)
+class LagRival:
+    """One rival: its report key, objective, parameter names and how it is told."""
+
+    key: str
+    objective: type
+    names: tuple
+    sides: tuple             # what each time constant is for, in the log line
+    conclusion: str
+
+    def fit(self, base, campaign, fit_mask, delay_s, sigma_nm, max_nfev: int = 40):
+        obj = self.objective(base, campaign, fit_mask, delay_s, sigma_nm)
+        fit = _fit_from_best_start(obj, _starts(delay_s), max_nfev, self.key)
+        if isinstance(obj, ForceDependentLagObjective):
+            fit.parameters = {**fit.parameters, "force_low_n": obj.f_low_n, "force_high_n": obj.f_high_n}
+        return fit
+
+    def describe(self, fit) -> str:
+        a, b = (1e3 * float(fit.parameters[n]) for n in self.names)
+        return (f"{self.key.replace('_', ' ')} ({a:.3g} ms {self.sides[0]}, {b:.3g} ms {self.sides[1]})")
+
+
+RIVALS = (
+    LagRival("asymmetric_lag", AsymmetricLagObjective, ("tau_apply_s", "tau_release_s"),
+             ("applying", "releasing"), "the force path lags the force one way on applying, another on releasing"),
+    LagRival("force_dependent_lag", ForceDependentLagObjective, ("tau_low_s", "tau_high_s"),
+             ("at low force", "at high force"), "the force path's lag changes with the force"),
+    LagRival("asymmetric_sensor_lag", AsymmetricSensorLagObjective, ("tau_rise_s", "tau_fall_s"),
+             ("as the reading grows", "as it shrinks"),
+             "the torque reading lags one way as it grows, another as it shrinks"),
+)
+
+
+def named_or_varying_lag(data, sel, campaign, sigma_nm: float, alpha: float, min_gain_frac: float,
+                         say=lambda msg: None):
+    """A selection that named a time mechanism, checked against each of RIVALS in its place
+    (module docstring) -> (selection, {rival key: what its check found}, or None when there was
+    nothing to check). The first rival to take the name ends the checks."""
+    timed = time_mechanism_ids(sel.cause_ids) if sel.verdict == "named" else []
+    if not timed:
+        return sel, None
+    model = sel.final.fit.model
+    stand_in = [m for m in model.mechanisms if m.id in timed]
+    base = model.with_mechanisms([m for m in model.mechanisms if m.id not in timed])
+    train = np.asarray(data.train_mask, bool)
+    delay_s = group_delay_s(stand_in)
+    checks = {}
+    for rival in RIVALS:
+        say(f"{', '.join(timed)} named: checking a {rival.key.replace('_', ' ')} beyond the catalog in its place")
+        fit = rival.fit(base, campaign, train, delay_s, sigma_nm)
+        a, b = (float(fit.parameters[n]) for n in rival.names)
+        out, found = _rival_in_place(data, sel, base, stand_in, fit, rival.describe(fit), rival.key, alpha,
+                                     min_gain_frac, say, rival.conclusion)
+        found["asymmetry_ratio"] = float(max(a, b) / min(a, b))
+        if found["took_the_name"] and found["asymmetry_ratio"] < ASYMMETRY_MIN_RATIO:
+            say(f"the two time constants are within {ASYMMETRY_MIN_RATIO:g}x of each other "
+                f"(ratio {found['asymmetry_ratio']:.2f}): the catalog's one lag, not taken")
+            found["took_the_name"] = False
+        checks[rival.key] = found
+        if found["took_the_name"]:
+            return out, checks
+    return sel, checks
