@@ -63,6 +63,16 @@ Effects outside the catalog (``effects``: [{"name": ..., parameter: value}]):
                                      actuator filled by a pump, drained through an orifice);
                                      mimics actuator_lag, which has one time constant (a
                                      force-path effect)
+  actuator_force_dependent_lag  tau_high_s  the pack force follows the measured force through a
+                         (tau_low_s    first-order lag whose time constant grows from tau_low_s
+                          0.02, force_ref_n 6000)  at zero pack force to tau_high_s at force_ref_n
+                                     (linear, constant beyond): a valve or motor slowing with the
+                                     load; mimics actuator_lag (a force-path effect)
+  torque_sensor_asymmetric_lag  tau_fall_s  measured = the transmitted torque through a first-order
+                         (tau_rise_s   lag of tau_rise_s while the reading moves away from zero
+                          0.015)       and tau_fall_s while it moves toward zero (a sensor filter
+                                     or bus averaging that differs by direction); mimics
+                                     torque_sensor_lag (a measurement effect)
 Friction effects (slip_power_fade, pressure_temperature_cross, run_friction_level) run in ``_trajectory_friction_factor``, the kernels' own step
 functions with the friction factor written through the degradation slot each row (so the
 factor heats the pack like any friction); measurement effects post-process the fine grid.
@@ -132,6 +142,18 @@ EFFECTS = {
                                            "first-order lag of time constant tau_apply_s while it "
                                            "rises and tau_release_s while it falls (pump-filled, "
                                            "orifice-drained actuator)"},
+    "actuator_force_dependent_lag": {"kind": "force-path",
+                                     "parameters": {"tau_high_s": 0.2, "tau_low_s": 0.02, "force_ref_n": 6000.0},
+                                     "mimics": "actuator_lag", "catalog_equivalent": None,
+                                     "physics": "the pack force follows the measured force through a "
+                                                "first-order lag whose time constant grows linearly from "
+                                                "tau_low_s at zero pack force to tau_high_s at force_ref_n "
+                                                "(a valve or motor slowing with the load)"},
+    "torque_sensor_asymmetric_lag": {"kind": "measurement", "parameters": {"tau_fall_s": 0.15, "tau_rise_s": 0.015},
+                                     "mimics": "torque_sensor_lag", "catalog_equivalent": None,
+                                     "physics": "measured = the transmitted torque through a first-order lag "
+                                                "of tau_rise_s while the reading moves away from zero and "
+                                                "tau_fall_s while it moves toward zero"},
 }
 
 DEFAULT_CLOCKS = {
@@ -517,6 +539,38 @@ def _asymmetric_lagged(force, run_start, tau_apply_steps, tau_release_steps):
     return out
 
 
+@njit(cache=True)
+def _force_dependent_lagged(force, run_start, tau_low_steps, tau_high_steps, force_ref_n):
+    """The force each fine row reaches through a first-order lag whose time constant (in fine
+    rows) is linear in the pack force, ``tau_low_steps`` at 0 to ``tau_high_steps`` at
+    ``force_ref_n`` and constant beyond (taken at the previous row's pack force)."""
+    out = np.empty_like(force)
+    for k in range(force.size):
+        if k == 0 or run_start[k]:
+            out[k] = force[k]
+        else:
+            share = min(max(out[k - 1] / force_ref_n, 0.0), 1.0)
+            tau = tau_low_steps + (tau_high_steps - tau_low_steps) * share
+            out[k] = out[k - 1] + (1.0 - math.exp(-1.0 / tau)) * (force[k] - out[k - 1])
+    return out
+
+
+@njit(cache=True)
+def _asymmetric_sensor(torque, run_start, tau_rise_steps, tau_fall_steps):
+    """The reading each fine row gives through a first-order lag of ``tau_rise_steps`` fine
+    rows while it moves away from zero toward the torque ((T - y) T > 0) and
+    ``tau_fall_steps`` while it moves toward zero."""
+    out = np.empty_like(torque)
+    a_rise, a_fall = 1.0 - math.exp(-1.0 / tau_rise_steps), 1.0 - math.exp(-1.0 / tau_fall_steps)
+    for k in range(torque.size):
+        if k == 0 or run_start[k]:
+            out[k] = torque[k]
+        else:
+            d = torque[k] - out[k - 1]
+            out[k] = out[k - 1] + (a_rise if d * torque[k] > 0.0 else a_fall) * d
+    return out
+
+
 def _second_order_per_run(force, run_start, f_n_hz, damping, dt_s):
     """The force each fine row reaches through a unit-gain second-order response (natural
     frequency ``f_n_hz``, damping ratio ``damping``; exact zero-order-hold discretisation),
@@ -598,6 +652,11 @@ def synthesize_car_logs(spec: CarLogSpec | None = None, base_model: ClutchModel 
     if asym is not None:
         force_pack = _asymmetric_lagged(force_pack, run_start, float(asym["tau_apply_s"]) * spec.fine_rate_hz,
                                         float(asym["tau_release_s"]) * spec.fine_rate_hz)
+    by_force = spec.effect_values("actuator_force_dependent_lag")
+    if by_force is not None:
+        force_pack = _force_dependent_lagged(force_pack, run_start, float(by_force["tau_low_s"]) * spec.fine_rate_hz,
+                                             float(by_force["tau_high_s"]) * spec.fine_rate_hz,
+                                             float(by_force["force_ref_n"]))
     reads_low = spec.effect_values("force_sensor_offset")
     if reads_low is not None:
         force_pack = force_pack + float(reads_low["offset_n"])
@@ -619,6 +678,11 @@ def synthesize_car_logs(spec: CarLogSpec | None = None, base_model: ClutchModel 
     lp = spec.effect_values("torque_sensor_lowpass")
     if lp is not None:
         sensor = _lowpass_per_run(t_abs, sensor, run_start, lp["tau_s"])
+    asym_sensor = spec.effect_values("torque_sensor_asymmetric_lag")
+    if asym_sensor is not None:
+        sensor = _asymmetric_sensor(np.ascontiguousarray(sensor, float), run_start,
+                                    float(asym_sensor["tau_rise_s"]) * spec.fine_rate_hz,
+                                    float(asym_sensor["tau_fall_s"]) * spec.fine_rate_hz)
 
     runs = []
     names = [f"drive_{i:02d}" for i in range(n_runs)] if spec.schedule == "long-drive" else \

@@ -336,6 +336,53 @@ def test_actuator_asymmetric_lag_applies_and_releases_at_their_own_time_constant
     assert truth["mimics"] == "actuator_lag" and on.spec.expected_cause == "unexplained"
 
 
+def test_actuator_force_dependent_lag_slows_with_the_pack_force():
+    """actuator_force_dependent_lag: the plant sees the request through x' = (F - x) / tau(x),
+    tau linear from tau_low at 0 N to tau_high at force_ref_n, constant beyond (the request held
+    over each fine step; solve_ivp step by step with tau at the step's start, as the car takes
+    it)."""
+    from scipy.integrate import solve_ivp
+    from clutch_model.virtual_car.car_logs import CarLogSpec, synthesize_car_logs
+    lo, hi, ref_n = 0.02, 0.25, 6000.0
+    base = synthesize_car_logs(CarLogSpec(seed=2, n_runs=1))
+    on = synthesize_car_logs(CarLogSpec(seed=2, n_runs=1, effects=[{"name": "actuator_force_dependent_lag",
+                                                                    "tau_high_s": hi}]))
+    t, request = base.runs[0].fine["t_s"], base.runs[0].fine["applied_force_n"]
+    pack = np.empty_like(request)
+    pack[0] = request[0]
+    for k in range(1, request.size):
+        tau = lo + (hi - lo) * min(max(pack[k - 1] / ref_n, 0.0), 1.0)
+        pack[k] = solve_ivp(lambda _t, x: (request[k] - x) / tau, (t[k - 1], t[k]), [pack[k - 1]],
+                            rtol=1e-11, atol=1e-9).y[0, -1]
+    _assert_plant_driven_by(pack, on, base, rtol=1e-6, atol=1e-3, min_change_rms_nm=5.0)
+    truth = on.truth["effects"][0]
+    assert truth["parameters"] == {"tau_high_s": hi, "tau_low_s": lo, "force_ref_n": ref_n}
+    assert truth["mimics"] == "actuator_lag" and on.spec.expected_cause == "unexplained"
+
+
+def test_torque_sensor_asymmetric_lag_reads_rises_fast_and_falls_slowly():
+    """torque_sensor_asymmetric_lag: the plant is untouched, the reading is the noise-free
+    measurement of the effect-free car through y' = (T - y) / tau, tau_rise while (T - y) T > 0,
+    tau_fall otherwise (T held over each fine step; solved exactly step by step here)."""
+    from clutch_model.virtual_car.car_logs import CarLogSpec, synthesize_car_logs
+    rise, fall = 0.015, 0.18
+    base = synthesize_car_logs(CarLogSpec(seed=2, n_runs=1))
+    on = synthesize_car_logs(CarLogSpec(seed=2, n_runs=1, effects=[{"name": "torque_sensor_asymmetric_lag",
+                                                                    "tau_fall_s": fall}]))
+    fb, fo = base.runs[0].fine, on.runs[0].fine
+    np.testing.assert_array_equal(fo["torque_nm"], fb["torque_nm"])          # the plant is the same
+    t, u = fb["t_s"], fb["sensor_torque_nm"]
+    y = np.empty_like(u)
+    y[0] = u[0]
+    for k in range(1, u.size):
+        tau = rise if (u[k] - y[k - 1]) * u[k] > 0 else fall
+        y[k] = u[k] + (y[k - 1] - u[k]) * np.exp(-(t[k] - t[k - 1]) / tau)
+    np.testing.assert_allclose(fo["sensor_torque_nm"], y, rtol=1e-9, atol=1e-6)
+    assert np.sqrt(np.mean((y - u) ** 2)) > 5.0
+    truth = on.truth["effects"][0]
+    assert truth["mimics"] == "torque_sensor_lag" and on.spec.expected_cause == "unexplained"
+
+
 def test_cli_car_logs(tmp_path):
     from clutch_sim.cli import main
     out = tmp_path / "c"
