@@ -81,6 +81,14 @@ def group_delay_s(mechanisms) -> float:
     return float(sum(float(m.values[name]) for m in mechanisms for name in time_parameter_names(m.id)))
 
 
+def taken_out(model: ClutchModel, ids) -> tuple:
+    """(the mechanisms of ``model`` among ``ids``, ``model`` without them): what a rival stands
+    in for, and the model it is fitted on."""
+    ids = set(ids)
+    return ([m for m in model.mechanisms if m.id in ids],
+            model.with_mechanisms([m for m in model.mechanisms if m.id not in ids]))
+
+
 def _start_f_n_hz(damping: float, delay_s: float) -> float:
     """The natural frequency whose group delay 2 damping / w is ``delay_s``, within the bounds."""
     f_n = 2.0 * damping / (2 * math.pi * max(delay_s, 1e-3))
@@ -233,9 +241,7 @@ def named_or_force_dynamics(data, sel, campaign, sigma_nm: float, alpha: float, 
     timed = time_mechanism_ids(sel.cause_ids) if sel.verdict == "named" else []
     if not timed:
         return sel, None
-    model = sel.final.fit.model
-    stand_in = [m for m in model.mechanisms if m.id in timed]
-    base = model.with_mechanisms([m for m in model.mechanisms if m.id not in timed])
+    stand_in, base = taken_out(sel.final.fit.model, timed)
     say(f"{', '.join(timed)} named: checking a second-order force path beyond the catalog in its place")
     fit = fit_second_order(base, campaign, np.asarray(data.train_mask, bool), group_delay_s(stand_in),
                            noise_sigma_nm=sigma_nm)
@@ -364,9 +370,7 @@ def named_or_constant_play(data, sel, campaign, sigma_nm: float, alpha: float, m
     named = sel.verdict == "named" and "actuator_hysteresis" in sel.cause_ids
     if not named:
         return sel, None
-    model = sel.final.fit.model
-    stand_in = [m for m in model.mechanisms if m.id == "actuator_hysteresis"]
-    base = model.with_mechanisms([m for m in model.mechanisms if m.id != "actuator_hysteresis"])
+    stand_in, base = taken_out(sel.final.fit.model, ["actuator_hysteresis"])
     train = np.asarray(data.train_mask, bool)
     say("actuator_hysteresis named: checking a play of constant width beyond the catalog in its place")
     fit = fit_play(base, campaign, train, play_starts_n(float(stand_in[0].values["ratio"]), campaign.force, train),
@@ -432,12 +436,9 @@ def named_or_force_offset(data, sel, campaign, sigma_nm: float, alpha: float, mi
     named causes stand in for an error in the force the model is driven with: ``unexplained``."""
     if sel.verdict != "named" or not sel.cause_ids:
         return sel, None
-    model = sel.final.fit.model
-    named = set(sel.cause_ids)
-    stand_in = [m for m in model.mechanisms if m.id in named]
+    stand_in, base = taken_out(sel.final.fit.model, sel.cause_ids)
     if not stand_in:
         return sel, None
-    base = model.with_mechanisms([m for m in model.mechanisms if m.id not in named])
     say(f"{', '.join(sel.cause_ids)} named: checking an offset on the measured force beyond the catalog in their place")
     fit = fit_force_offset(base, campaign, np.asarray(data.train_mask, bool), noise_sigma_nm=sigma_nm)
     c = float(fit.parameters["offset_n"])

@@ -32,7 +32,7 @@ from numba import njit
 
 from clutch_model.diagnosis.fitting import time_mechanism_ids
 from clutch_model.diagnosis.force_dynamics import (MAX_SUBSTEP_S, ForcePathObjective, _fit_from_best_start,
-                                                   _rival_in_place, group_delay_s)
+                                                   _rival_in_place, group_delay_s, taken_out)
 from clutch_model.plant.mechanisms import ParamSpec
 from clutch_model.plant.params import ClutchModel
 from clutch_model.prediction import predict_campaign
@@ -186,6 +186,7 @@ class ForceDependentLagObjective(ForcePathObjective):
         f = f[np.isfinite(f) & (f > 0)]
         self.f_low_n, self.f_high_n = (float(v) for v in (np.quantile(f, FORCE_LEVEL_QUANTILES)
                                                           if f.size else (0.0, 1.0)))
+        self.fixed_parameters = {"force_low_n": self.f_low_n, "force_high_n": self.f_high_n}   # reported with the fit
         super().__init__(base, campaign, fit_mask, _two_constants("tau_low_s", "tau_high_s", delay_s),
                          noise_sigma_nm=noise_sigma_nm)
 
@@ -233,8 +234,7 @@ class LagRival:
     def fit(self, base, campaign, fit_mask, delay_s, sigma_nm, max_nfev: int = 40):
         obj = self.objective(base, campaign, fit_mask, delay_s, sigma_nm)
         fit = _fit_from_best_start(obj, _starts(delay_s), max_nfev, self.key)
-        if isinstance(obj, ForceDependentLagObjective):
-            fit.parameters = {**fit.parameters, "force_low_n": obj.f_low_n, "force_high_n": obj.f_high_n}
+        fit.parameters = {**fit.parameters, **getattr(obj, "fixed_parameters", {})}
         return fit
 
     def describe(self, fit) -> str:
@@ -261,9 +261,7 @@ def named_or_varying_lag(data, sel, campaign, sigma_nm: float, alpha: float, min
     timed = time_mechanism_ids(sel.cause_ids) if sel.verdict == "named" else []
     if not timed:
         return sel, None
-    model = sel.final.fit.model
-    stand_in = [m for m in model.mechanisms if m.id in timed]
-    base = model.with_mechanisms([m for m in model.mechanisms if m.id not in timed])
+    stand_in, base = taken_out(sel.final.fit.model, timed)
     train = np.asarray(data.train_mask, bool)
     delay_s = group_delay_s(stand_in)
     checks = {}
