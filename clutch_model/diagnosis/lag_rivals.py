@@ -168,9 +168,10 @@ class AsymmetricLagObjective(ForcePathObjective):
     """The asymmetric lag on the force path: x = [log tau_apply, log tau_release] then the
     friction correction."""
 
-    def __init__(self, base: ClutchModel, campaign, fit_mask, delay_s: float, noise_sigma_nm: float = 1.0):
+    def __init__(self, base: ClutchModel, campaign, fit_mask, delay_s: float, noise_sigma_nm: float = 1.0,
+                 ridge_factor: float = 1.0):
         super().__init__(base, campaign, fit_mask, _two_constants("tau_apply_s", "tau_release_s", delay_s),
-                         noise_sigma_nm=noise_sigma_nm)
+                         noise_sigma_nm=noise_sigma_nm, ridge_factor=ridge_factor)
 
     def path_force(self, values) -> np.ndarray:
         pi = self._plant_inputs
@@ -181,14 +182,15 @@ class ForceDependentLagObjective(ForcePathObjective):
     """The force-dependent lag on the force path: x = [log tau_low, log tau_high] then the
     friction correction; the constant moves between the training forces' FORCE_LEVEL_QUANTILES."""
 
-    def __init__(self, base: ClutchModel, campaign, fit_mask, delay_s: float, noise_sigma_nm: float = 1.0):
+    def __init__(self, base: ClutchModel, campaign, fit_mask, delay_s: float, noise_sigma_nm: float = 1.0,
+                 ridge_factor: float = 1.0):
         f = np.asarray(campaign.force, float)[np.asarray(fit_mask, bool)]
         f = f[np.isfinite(f) & (f > 0)]
         self.f_low_n, self.f_high_n = (float(v) for v in (np.quantile(f, FORCE_LEVEL_QUANTILES)
                                                           if f.size else (0.0, 1.0)))
         self.fixed_parameters = {"force_low_n": self.f_low_n, "force_high_n": self.f_high_n}   # reported with the fit
         super().__init__(base, campaign, fit_mask, _two_constants("tau_low_s", "tau_high_s", delay_s),
-                         noise_sigma_nm=noise_sigma_nm)
+                         noise_sigma_nm=noise_sigma_nm, ridge_factor=ridge_factor)
 
     def path_force(self, values) -> np.ndarray:
         pi = self._plant_inputs
@@ -200,9 +202,10 @@ class AsymmetricSensorLagObjective(ForcePathObjective):
     """The asymmetric lag on the measurement: x = [log tau_rise, log tau_fall] then the
     friction correction; the plant is the base model's, its reading lagged."""
 
-    def __init__(self, base: ClutchModel, campaign, fit_mask, delay_s: float, noise_sigma_nm: float = 1.0):
+    def __init__(self, base: ClutchModel, campaign, fit_mask, delay_s: float, noise_sigma_nm: float = 1.0,
+                 ridge_factor: float = 1.0):
         super().__init__(base, campaign, fit_mask, _two_constants("tau_rise_s", "tau_fall_s", delay_s),
-                         noise_sigma_nm=noise_sigma_nm)
+                         noise_sigma_nm=noise_sigma_nm, ridge_factor=ridge_factor)
 
     def _predict_xs(self, xs) -> np.ndarray:
         """One plant simulation per friction correction: the columns of a Jacobian that differ
@@ -231,8 +234,8 @@ class LagRival:
     sides: tuple             # what each time constant is for, in the log line
     conclusion: str
 
-    def fit(self, base, campaign, fit_mask, delay_s, sigma_nm, max_nfev: int = 40):
-        obj = self.objective(base, campaign, fit_mask, delay_s, sigma_nm)
+    def fit(self, base, campaign, fit_mask, delay_s, sigma_nm, max_nfev: int = 40, ridge_factor: float = 1.0):
+        obj = self.objective(base, campaign, fit_mask, delay_s, sigma_nm, ridge_factor)
         fit = _fit_from_best_start(obj, _starts(delay_s), max_nfev, self.key)
         fit.parameters = {**fit.parameters, **getattr(obj, "fixed_parameters", {})}
         return fit
@@ -261,13 +264,13 @@ def named_or_varying_lag(data, sel, campaign, sigma_nm: float, alpha: float, min
     timed = time_mechanism_ids(sel.cause_ids) if sel.verdict == "named" else []
     if not timed:
         return sel, None
-    stand_in, base = taken_out(sel.final.fit.model, timed)
+    stand_in, base, ridge = taken_out(sel.final, timed)
     train = np.asarray(data.train_mask, bool)
     delay_s = group_delay_s(stand_in)
     checks = {}
     for rival in RIVALS:
         say(f"{', '.join(timed)} named: checking a {rival.key.replace('_', ' ')} beyond the catalog in its place")
-        fit = rival.fit(base, campaign, train, delay_s, sigma_nm)
+        fit = rival.fit(base, campaign, train, delay_s, sigma_nm, ridge_factor=ridge)
         a, b = (float(fit.parameters[n]) for n in rival.names)
         out, found = _rival_in_place(data, sel, base, stand_in, fit, rival.describe(fit), rival.key, alpha,
                                      min_gain_frac, say, rival.conclusion)

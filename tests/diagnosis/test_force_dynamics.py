@@ -261,14 +261,48 @@ def test_a_force_path_rival_takes_the_name_when_its_larger_plain_error_is_chance
     r_rival = noise + wander
     head = _compare(data, r_named, r_rival, DEFAULT_MAX_ORDER)
     assert head.t_stat > 4 and head.rmse_alt > head.rmse_null     # innovations for it, plain RMSE against
-    takes, worse = rival_takes_the_name(data, head, r_named, r_rival, 1e-3, 0.005)
-    assert takes and worse.p_value >= PLAIN_WORSE_ALPHA
+    takes, worse, plain = rival_takes_the_name(data, head, r_named, r_rival, 1e-3, 0.005)
+    assert takes and worse.p_value >= PLAIN_WORSE_ALPHA and plain is None
     # a level that is the rival's own misfit, not chance: refused
     r_rival_level = noise + 2.5
     head = _compare(data, r_named, r_rival_level, DEFAULT_MAX_ORDER)
-    takes, worse = rival_takes_the_name(data, head, r_named, r_rival_level, 1e-3, 0.005)
+    takes, worse, _ = rival_takes_the_name(data, head, r_named, r_rival_level, 1e-3, 0.005)
     assert not takes and worse.p_value < PLAIN_WORSE_ALPHA
-    # the innovations not won: no plain test needed
-    takes, worse = rival_takes_the_name(data, _compare(data, r_rival, r_named, DEFAULT_MAX_ORDER), r_rival, r_named,
-                                        1e-3, 0.005)
-    assert not takes and worse is None
+    # the innovations not won: the plain-squares test instead, which the wandering level fails
+    takes, worse, plain = rival_takes_the_name(data, _compare(data, r_rival, r_named, DEFAULT_MAX_ORDER), r_rival,
+                                               r_named, 1e-3, 0.005)
+    assert not takes and worse is None and plain.cut_frac < 0.2
+
+
+def test_a_rival_the_innovations_are_blind_to_takes_the_name_by_a_material_plain_cut():
+    """A long noise model forecasts a slow misfit from its own past (an AR(48) did on an
+    asymmetric torque-sensor lag: innovations at t = 2.5 with the plain mean square cut by half).
+    With the innovations short of it, the rival takes the name when it cuts the named model's
+    plain held-out mean square materially at the test level over blocks, and not when what it
+    changes is noise or a small part of the misfit."""
+    from dataclasses import replace
+
+    from clutch_model.diagnosis.force_dynamics import rival_takes_the_name
+    from clutch_model.diagnosis.selection import SelectionData, _compare
+    from clutch_model.diagnosis.structure_test import DEFAULT_MAX_ORDER, MIN_PLAIN_CUT
+
+    t, run_start = _rows(60.0)
+    rng = np.random.default_rng(11)
+    noise = _ar1(rng, t.size, phi=0.95)
+    train = (t % 6.0) < 4.0
+    data = SelectionData(y=noise, t=t, run_start=run_start, train_mask=train, test_mask=~train)
+    slow = 10.0 * np.sin(2 * np.pi * 0.4 * t + 1.0)           # what the named model leaves
+    cases = {"removes most of it": (noise + slow, noise + 0.2 * slow, True),
+             "a noise of its own": (noise, noise + 1.5 * _ar1(rng, t.size, phi=0.95, sd=1.0), False),
+             "a tenth of it": (noise + slow, noise + 0.95 * slow, False)}
+    for what, (r_named, r_rival, expected) in cases.items():
+        head = _compare(data, r_named, r_rival, DEFAULT_MAX_ORDER)
+        short = replace(head, t_stat=2.0, p_value=0.03)       # the innovations short of it
+        takes, worse, plain = rival_takes_the_name(data, short, r_named, r_rival, 1e-3, 0.005)
+        assert worse is None and plain is not None, what
+        assert takes is expected, (what, plain)
+        assert (plain.cut_frac > MIN_PLAIN_CUT) is expected, (what, plain)
+        # expected cut in plain squares: 1 - E r_rival^2 / E r_named^2 on the held-out rows
+        rows = ~train
+        cut = 1.0 - np.sum(r_rival[rows] ** 2) / np.sum(r_named[rows] ** 2)
+        assert plain.cut_frac == pytest.approx(cut, abs=0.02), what
