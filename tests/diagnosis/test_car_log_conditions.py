@@ -304,6 +304,27 @@ def test_an_asymmetric_actuator_lag_is_not_named_a_catalog_time_mechanism(tmp_pa
     assert check["held_out_rmse"] < 0.5 * check["named_held_out_rmse"], check
 
 
+# An actuator whose lag grows with the force (20 ms at no force, 137 ms at 6 kN) is outside the
+# catalog: over one 40 s drive the catalog named torque_sensor_lag (78 ms; a wrong name, +45 %
+# on the unseen bag) and every rival in its place lost, fitted on top of the named model's
+# friction correction with a second one (force_dynamics.taken_out: the rivals now start from
+# the friction the named fit started from).
+def test_a_force_dependent_actuator_lag_is_not_named_a_catalog_time_mechanism(tmp_path):
+    tau_high = 0.13657649497006213
+    res, what = _diagnosed(tmp_path, "actuator_force_dependent_lag", "long_drive", 1,
+                           {"actuator_force_dependent_lag": tau_high})
+    assert res.verdict == "unexplained", what
+    check = res.report["selection"]["lag_rival_checks"]["force_dependent_lag"]
+    assert check["took_the_name"] and check["in_place_of"], check
+    p = check["parameters"]
+    # the effect's constant is linear in the force, 20 ms at 0 N to tau_high at 6 kN: the
+    # rival's, linear between its two reported forces, must match it there
+    for force_key, tau_key in (("force_low_n", "tau_low_s"), ("force_high_n", "tau_high_s")):
+        truth = 0.02 + (tau_high - 0.02) * p[force_key] / 6000.0
+        assert p[tau_key] == pytest.approx(truth, rel=0.35), (force_key, check)
+    assert check["held_out_rmse"] < 0.85 * check["named_held_out_rmse"], check
+
+
 # A slew-rate-limited actuator (23.5 kN/s) is outside the catalog and no first-order mechanism
 # carries it (a lag fitted to the large force edges is wrong on the small ones); the calibrated
 # residual, a smooth misfit at the fast edges, was forecast by the noise model and the answer read
