@@ -186,7 +186,8 @@ def fit_second_order(base: ClutchModel, campaign, fit_mask, delay_s: float, nois
 def _fit_from_best_start(obj: ForcePathObjective, starts, max_nfev: int, fit_id: str) -> ForcePathFit:
     """Least squares of ``obj`` from the best (on the training rows) of the path ``starts``
     (search-transformed values; friction correction 0) -> the fitted force path."""
-    xs = np.vstack([np.concatenate([np.asarray(x0, float), np.zeros(N_CORR)]) for x0 in starts])
+    n_corr = N_CORR if obj.fit_friction else 0      # none at an infinite ridge (the data's choice)
+    xs = np.vstack([np.concatenate([np.asarray(x0, float), np.zeros(n_corr)]) for x0 in starts])
     sse = np.nansum(obj.data_residuals(obj.predict(xs)) ** 2, axis=1)
     x = solve_from(obj, xs[int(np.argmin(sse))], max_nfev)
     params = {s.name: s.from_x(x[j]) for j, s in enumerate(obj.specs)}
