@@ -306,3 +306,33 @@ def test_a_rival_the_innovations_are_blind_to_takes_the_name_by_a_material_plain
         rows = ~train
         cut = 1.0 - np.sum(r_rival[rows] ** 2) / np.sum(r_named[rows] ** 2)
         assert plain.cut_frac == pytest.approx(cut, abs=0.02), what
+
+
+def test_a_rate_limit_binding_on_a_few_rows_is_below_resolution():
+    """A slew-rate limit that holds the force off the measured one on a few rows (the steps of
+    a force sampled slower than the rows) is not an actuator's slew and never takes the name;
+    one that binds on every large edge keeps what its test found."""
+    from types import SimpleNamespace
+
+    from clutch_model.diagnosis.force_dynamics import MIN_RATE_LIMIT_BINDING, _unless_rarely_binding
+
+    t, run_start = _rows(40.0, 200.0)
+    rng = np.random.default_rng(3)
+    # controller-like edges: 4 kN applied and released over 50 ms every 2 s, force noise 5 N
+    phase = t % 2.0
+    force = 4000.0 * np.clip(np.minimum(phase - 0.5, 1.55 - phase) / 0.05, 0.0, 1.0) + rng.normal(0.0, 5.0, t.size)
+    force[np.isin(np.arange(t.size), [1000, 3000, 5000, 7000])] += 1500.0   # a few isolated one-row jumps
+    n = t.size
+    campaign = SimpleNamespace(t=t, force=force, slip=np.full(n, 10.0), sump=np.full(n, 60.0),
+                               run_start=run_start, runs=None)
+    before = SimpleNamespace(final=SimpleNamespace(context=SimpleNamespace(force_noise_n=5.0)))
+    named = SimpleNamespace(final=before.final, verdict="unexplained")
+    train = (t % 6.0) < 4.0
+    # 8e4 N/s on 4 kN / 50 ms edges (8e4 N/s): binding on no edge, only the isolated jumps
+    sel, found = _unless_rarely_binding(named, before, {"took_the_name": True}, campaign, train, 1.0e5, print)
+    assert sel is before and not found["took_the_name"] and found["rarely_binding"]
+    assert 0 < found["binding_row_fraction"] < MIN_RATE_LIMIT_BINDING
+    # 20 kN/s: every edge takes 0.2 s instead of 50 ms, a tenth of the rows held off
+    sel, found = _unless_rarely_binding(named, before, {"took_the_name": True}, campaign, train, 2.0e4, print)
+    assert sel is named and found["took_the_name"]
+    assert found["binding_row_fraction"] > 10 * MIN_RATE_LIMIT_BINDING
