@@ -43,6 +43,7 @@ from clutch_model.diagnosis.force_dynamics import (named_or_constant_play, named
                                                    named_or_force_offset, none_or_constant_play,
                                                    none_or_force_offset, none_or_rate_limit)
 from clutch_model.diagnosis.lag_rivals import named_or_varying_lag
+from clutch_model.diagnosis.slip_acceleration import named_or_slip_acceleration
 from clutch_model.diagnosis.bench_anchor import named_and_bench_anchored, none_or_bench_anchored
 from clutch_model.diagnosis.fitting import CANDIDATE_IDS, CandidateFit, fit_candidate
 from clutch_model.diagnosis.friction_ridge import held_to_the_data
@@ -598,6 +599,10 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
     sel, force_dynamics = named_or_force_dynamics(data, sel, campaign, sigma_guess, ALPHA, NAMED_GAIN_FRAC, say)
     # and against lags whose time constant is not one (lag_rivals.py)
     sel, lag_rivals = named_or_varying_lag(data, sel, campaign, sigma_guess, ALPHA, NAMED_GAIN_FRAC, say)
+    # and against a friction that follows the slip's acceleration (slip_acceleration.py)
+    sel, slip_accel = named_or_slip_acceleration(data, sel, campaign, sigma_guess, ALPHA, NAMED_GAIN_FRAC, say)
+    if slip_accel is not None:
+        lag_rivals = {**(lag_rivals or {}), "slip_acceleration_friction": slip_accel}
     # a named hysteresis band against a play of constant width (force_dynamics.py)
     sel, force_band = named_or_constant_play(data, sel, campaign, sigma_guess, ALPHA, NAMED_GAIN_FRAC, say)
     # the named causes against an offset on the measured force (force_dynamics.py)
