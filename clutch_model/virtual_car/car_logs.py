@@ -36,6 +36,10 @@ Effects outside the catalog (``effects``: [{"name": ..., parameter: value}]):
                          (order 1)   per run: once-per-revolution runout
   slip_power_fade        k_per_kw    μ_f / (1 + k·P̄/1 kW), P̄ = slip power through a first-order
                          (tau_s 1.0) filter: reversible fade, mimics friction_degradation
+  slip_acceleration_friction gain_s2_per_rad  μ_f × (1 + c·a), a = d|ω|/dt through a first-order
+                         (tau_s 0.03) low-pass: frictional memory, the friction rises while the slip
+                                     speeds up; mimics actuator_lag (an engagement's slip falls
+                                     as its torque rises)
   pressure_temperature_cross coeff   μ_f × (1 + c·P·(θ_pack − 60 °C)), P in MPa
   run_friction_level     spread      μ_f × (1 + U(−s, s)) drawn per run
   actuator_rate_limit    rate_n_per_s  the pack force follows the measured force at a slew rate
@@ -73,7 +77,7 @@ Effects outside the catalog (``effects``: [{"name": ..., parameter: value}]):
                           0.015)       and tau_fall_s while it moves toward zero (a sensor filter
                                      or bus averaging that differs by direction); mimics
                                      torque_sensor_lag (a measurement effect)
-Friction effects (slip_power_fade, pressure_temperature_cross, run_friction_level) run in ``_trajectory_friction_factor``, the kernels' own step
+Friction effects (slip_power_fade, slip_acceleration_friction, pressure_temperature_cross, run_friction_level) run in ``_trajectory_friction_factor``, the kernels' own step
 functions with the friction factor written through the degradation slot each row (so the
 factor heats the pack like any friction); measurement effects post-process the fine grid.
 """
@@ -113,6 +117,11 @@ EFFECTS = {
     "slip_power_fade": {"kind": "friction", "parameters": {"k_per_kw": 0.03, "tau_s": 1.0},
                         "mimics": "friction_degradation", "catalog_equivalent": None,
                         "physics": "reversible fade: mu_f / (1 + k P_slip/1 kW), P_slip low-passed"},
+    "slip_acceleration_friction": {"kind": "friction", "parameters": {"gain_s2_per_rad": 0.006, "tau_s": 0.03},
+                                   "mimics": "actuator_lag", "catalog_equivalent": None,
+                                   "physics": "frictional memory: mu_f x (1 + c a), a = d/dt of |slip| through a "
+                                              "first-order low-pass of tau_s (the film and lining lag a change of "
+                                              "slip): the friction rises while the slip speeds up"},
     "pressure_temperature_cross": {"kind": "friction", "parameters": {"coeff": 2e-3},
                                    "mimics": None, "catalog_equivalent": None,
                                    "physics": "mu_f x (1 + c P (theta_pack - 60 C)), P in MPa"},
@@ -423,10 +432,11 @@ def _torque_per_newton(model: ClutchModel, mu: float = 0.2) -> float:
 # ------------------------------------------------------------------------------ plant
 @njit(cache=True)
 def _trajectory_friction_factor(p, t, force, slip, sump, run_start, run_level, pt_coeff, fade_k_per_w,
-                                fade_tau, degr_scale, energy0):
+                                fade_tau, degr_scale, energy0, accel_gain=0.0, accel_tau=0.03):
     """kernels.run_trajectory with μ_f × factor, factor = run_level[run]·(1 + pt_coeff·P·(θ−60))
-    / (1 + fade_k·P̄) · exp(−E/degr_scale), written through the degradation slot (p's energy
-    scale must be 1: the energy state holds −ln factor). E and P̄ are tracked here; the
+    / (1 + fade_k·P̄) · exp(−E/degr_scale) · (1 + clip(accel_gain·a, ±0.5)), a = d/dt of |slip|
+    through a low-pass of accel_tau, written through the degradation slot (p's energy
+    scale must be 1: the energy state holds −ln factor). E, P̄ and a are tracked here; the
     record's O_ENERGY column holds E. Needs steps ≤ kernels.MAX_STEP_S (one sub-step)."""
     n = t.size
     d = K.derived_constants(p)
@@ -436,6 +446,8 @@ def _trajectory_friction_factor(p, t, force, slip, sump, run_start, run_level, p
     energy = energy0
     pbar = 0.0
     prev_power = 0.0
+    slip_lp = 0.0
+    accel = 0.0
     run = -1
     for k in range(n):
         if k == 0 or run_start[k]:
@@ -443,12 +455,20 @@ def _trajectory_friction_factor(p, t, force, slip, sump, run_start, run_level, p
             run += 1
             pbar = 0.0
             prev_power = 0.0
+            slip_lp = abs(slip[k])
+            accel = 0.0
         else:
             dt = t[k] - t[k - 1]
             K.advance(state, slip[k - 1], sump[k - 1], dt, p, d, scratch)
             energy += 0.5 * (prev_power + scratch[K.O_POWER]) * dt
             a = math.exp(-dt / fade_tau)
             pbar = a * pbar + (1.0 - a) * prev_power
+            if accel_gain != 0.0:
+                # |slip| linear over the step through the low-pass, exactly; a = (|w| - y) / tau
+                u0, u1 = abs(slip[k - 1]), abs(slip[k])
+                rate = (u1 - u0) / dt
+                slip_lp = u1 - rate * accel_tau + (slip_lp - u0 + rate * accel_tau) * math.exp(-dt / accel_tau)
+                accel = (u1 - slip_lp) / accel_tau
         K.pack_force_target(state, force[k], p)
         fp = state[K.S_FPACK]
         if fp > d[K.D_FMAX]:
@@ -457,6 +477,8 @@ def _trajectory_friction_factor(p, t, force, slip, sump, run_start, run_level, p
         fac = run_level[run] * (1.0 + pt_coeff * pr * (state[K.S_THETA] - 60.0)) / (1.0 + fade_k_per_w * pbar)
         if degr_scale > 0.0:
             fac *= math.exp(-energy / degr_scale)
+        if accel_gain != 0.0:
+            fac *= 1.0 + min(max(accel_gain * accel, -0.5), 0.5)
         if fac < 0.05:
             fac = 0.05
         state[K.S_ENERGY] = -math.log(fac)
@@ -473,8 +495,9 @@ def _simulate_plant(model: ClutchModel, spec: CarLogSpec, t, force, slip, sump, 
     pt = spec.effect_values("pressure_temperature_cross")
     fade = spec.effect_values("slip_power_fade")
     lvl = spec.effect_values("run_friction_level")
+    acc = spec.effect_values("slip_acceleration_friction")
     info = {}
-    if pt is None and fade is None and lvl is None:
+    if pt is None and fade is None and lvl is None and acc is None:
         res = simulate(model, t, force, slip, sump, run_start=run_start)
         return {"torque": res.torque_nm, "pack": res.pack_temperature_c, "locked": res.locked,
                 "power": res.power_w, "mu": res.friction_coefficient}, info
@@ -491,7 +514,8 @@ def _simulate_plant(model: ClutchModel, spec: CarLogSpec, t, force, slip, sump, 
         np.ascontiguousarray(sump), np.ascontiguousarray(run_start, dtype=np.bool_), levels,
         float(pt["coeff"]) if pt else 0.0, float(fade["k_per_kw"]) * 1e-3 if fade else 0.0,
         float(fade["tau_s"]) if fade else 1.0,
-        float(degr.values["energy_scale_j"]) if degr is not None else 0.0, 0.0)
+        float(degr.values["energy_scale_j"]) if degr is not None else 0.0, 0.0,
+        float(acc["gain_s2_per_rad"]) if acc else 0.0, float(acc["tau_s"]) if acc else 0.03)
     return {"torque": out[:, K.O_TORQUE], "pack": out[:, K.O_THETA], "locked": out[:, K.O_LOCKED] > 0.5,
             "power": out[:, K.O_POWER], "mu": out[:, K.O_MU]}, info
 

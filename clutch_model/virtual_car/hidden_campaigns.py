@@ -134,7 +134,8 @@ EFFECT_RANGES = {"torque_sensor_lowpass": ("tau_s", (0.02, 0.15)),
                  "force_sensor_offset": ("offset_n", (300.0, 800.0)),
                  "actuator_asymmetric_lag": ("tau_release_s", (0.12, 0.3)),
                  "actuator_force_dependent_lag": ("tau_high_s", (0.12, 0.3)),
-                 "torque_sensor_asymmetric_lag": ("tau_fall_s", (0.08, 0.25))}
+                 "torque_sensor_asymmetric_lag": ("tau_fall_s", (0.08, 0.25)),
+                 "slip_acceleration_friction": ("gain_s2_per_rad", (0.004, 0.012))}
 
 
 @dataclass(frozen=True)
@@ -158,7 +159,7 @@ def _cases() -> dict:
                       "torque_ripple", "pressure_temperature_cross", "actuator_rate_limit",
                       "actuator_second_order", "actuator_backlash", "force_sensor_offset",
                       "actuator_asymmetric_lag", "actuator_force_dependent_lag",
-                      "torque_sensor_asymmetric_lag")]
+                      "torque_sensor_asymmetric_lag", "slip_acceleration_friction")]
     return {c.name: c for c in out}
 
 

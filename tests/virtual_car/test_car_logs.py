@@ -195,6 +195,29 @@ def test_friction_effect_changes_torque_not_when_off(tmp_path_factory):
     assert np.sqrt(np.mean(d ** 2)) > 10.0
 
 
+def test_slip_acceleration_friction_scales_the_torque_by_the_filtered_slip_acceleration():
+    """slip_acceleration_friction: the torque is the plant's times 1 + c a, a = d|w|/dt through
+    a first-order low-pass of tau (the reference: scipy.signal.lsim of s / (tau s + 1) on |w|,
+    linear between fine rows), where the clutch slips; the heat the factor adds moves the torque
+    by far less than the factor does."""
+    from clutch_model.virtual_car.car_logs import CarLogSpec, synthesize_car_logs
+    c, tau = 0.008, 0.03
+    base = synthesize_car_logs(CarLogSpec(seed=4, n_runs=1))
+    on = synthesize_car_logs(CarLogSpec(seed=4, n_runs=1, effects=[{"name": "slip_acceleration_friction",
+                                                                     "gain_s2_per_rad": c, "tau_s": tau}]))
+    fine_on, fine = on.runs[0].fine, base.runs[0].fine
+    t = fine["t_s"] - fine["t_s"][0]
+    w = np.abs(fine["slip_speed_rad_s"])
+    _, a, _ = sps.lsim(([1.0, 0.0], [tau, 1.0]), w, t, X0=None, interp=True)
+    factor = 1.0 + np.clip(c * a, -0.5, 0.5)
+    rows = ~fine["locked"] & ~fine_on["locked"] & (np.abs(fine["torque_nm"]) > 50.0) & (t > 20 * tau)
+    assert rows.sum() > 500
+    ratio = fine_on["torque_nm"][rows] / fine["torque_nm"][rows]
+    np.testing.assert_allclose(ratio, factor[rows], rtol=0, atol=0.01)
+    assert np.std(factor[rows]) > 0.02                     # the effect is there to be seen
+    assert on.spec.expected_cause == "unexplained"
+
+
 def test_actuator_rate_limit_drives_the_plant_with_the_slew_limited_force():
     """actuator_rate_limit: the plant sees the request slewed at most R per second, the force
     sensor reads the request. Checked against the plant driven with a slew-limited force
