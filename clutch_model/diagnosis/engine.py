@@ -43,7 +43,7 @@ from clutch_model.diagnosis.force_dynamics import (named_or_constant_play, named
                                                    named_or_force_offset, none_or_constant_play,
                                                    none_or_force_offset, none_or_rate_limit)
 from clutch_model.diagnosis.lag_rivals import named_or_varying_lag
-from clutch_model.diagnosis.slip_acceleration import named_or_slip_acceleration
+from clutch_model.diagnosis.slip_acceleration import named_or_slip_acceleration, none_or_slip_acceleration
 from clutch_model.diagnosis.bench_anchor import named_and_bench_anchored, none_or_bench_anchored
 from clutch_model.diagnosis.fitting import CANDIDATE_IDS, CandidateFit, fit_candidate
 from clutch_model.diagnosis.friction_ridge import held_to_the_data
@@ -666,6 +666,10 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
         # and an offset on the measured force
         sel, reads_off = none_or_force_offset(data, sel, campaign, sigma_guess, ALPHA, NAMED_GAIN_FRAC, say)
         force_offset = force_offset or reads_off
+        # and a friction that follows the slip's acceleration (slip_acceleration.py)
+        sel, slip_accel = none_or_slip_acceleration(data, sel, campaign, sigma_guess, ALPHA, NAMED_GAIN_FRAC, say)
+        if slip_accel is not None:
+            lag_rivals = {**(lag_rivals or {}), "slip_acceleration_friction": slip_accel}
         timings["force dynamics"] += time.perf_counter() - t0
 
     # still nothing: a cause the car calibration absorbed, seen against the bench (bench_anchor.py)
