@@ -325,6 +325,23 @@ def test_a_force_dependent_actuator_lag_is_not_named_a_catalog_time_mechanism(tm
     assert check["held_out_rmse"] < 0.85 * check["named_held_out_rmse"], check
 
 
+# A friction that follows the slip's acceleration (frictional memory, c = 0.011 s^2/rad through a
+# 30 ms low-pass) is outside the catalog: where the slip's acceleration does not follow the
+# force edges no time mechanism mimics it, and the calibrated model, 35.7 N*m off the true torque
+# on the unseen runs, read `none` (the noise model forecast the smooth misfit) until the
+# slip-acceleration friction was fitted where nothing is named (diagnosis/slip_acceleration.py).
+def test_a_slip_acceleration_friction_is_found_beyond_the_catalog(tmp_path):
+    gain = 0.011
+    res, what = _diagnosed(tmp_path, "slip_acceleration_friction", "lab", 1,
+                           {"slip_acceleration_friction": gain})
+    assert res.verdict == "unexplained", what
+    check = res.report["selection"]["lag_rival_checks"]["slip_acceleration_friction"]
+    assert check["took_the_name"] and check["against_twin_t"] > 3.0, check
+    assert check["parameters"]["gain_s2_per_rad"] == pytest.approx(gain, rel=0.2), check
+    assert check["parameters"]["tau_s"] == pytest.approx(0.03, rel=0.6), check
+    assert check["held_out_rmse"] < 0.5 * check["calibrated_held_out_rmse"], check
+
+
 # A slew-rate-limited actuator (23.5 kN/s) is outside the catalog and no first-order mechanism
 # carries it (a lag fitted to the large force edges is wrong on the small ones); the calibrated
 # residual, a smooth misfit at the fast edges, was forecast by the noise model and the answer read
