@@ -140,6 +140,29 @@ class ForcePathObjective(CampaignObjective):
         return out
 
 
+class ReadingObjective(ForcePathObjective):
+    """A rival on the torque the plant gives, not on its force: the plant simulated once per
+    friction correction (the columns of a Jacobian that differ only in the rival's own
+    parameters share it), ``reading`` applied to it."""
+
+    def reading(self, plant: np.ndarray, values) -> np.ndarray:
+        """The measured torque from the plant's with the rival's parameter ``values`` (model units)."""
+        raise NotImplementedError
+
+    def _predict_xs(self, xs) -> np.ndarray:
+        pi = self._plant_inputs
+        xs = np.atleast_2d(np.asarray(xs, float))
+        out = np.empty((xs.shape[0], pi.n_rows))
+        groups: dict = {}
+        for k, x in enumerate(xs):
+            groups.setdefault(tuple(float(v) for v in x[self.n_mech:]), []).append(k)
+        for rows in groups.values():
+            plant = predict_campaign([self.model_at(xs[rows[0]])], pi, energy0_j=0.0).torque_nm[0]
+            for k in rows:
+                out[k] = self.reading(plant, [s.from_x(v) for s, v in zip(self.specs, xs[k, :self.n_mech])])
+        return out
+
+
 class SecondOrderObjective(ForcePathObjective):
     """The second-order force path: x = [log f_n, log damping] then the friction correction."""
 
@@ -620,11 +643,17 @@ def _unless_rarely_binding(sel, before, found: dict, campaign, train, rate_n_per
     found["binding_row_fraction"] = frac
     if frac >= MIN_RATE_LIMIT_BINDING:
         return sel, found
+    return _refused(before, found, "rarely_binding", f"the rate limit holds the force off the measured one on "
+                    f"{100 * frac:.2g} % of the fitted rows (under {100 * MIN_RATE_LIMIT_BINDING:g} %)", say)
+
+
+def _refused(before, found: dict, flag: str, why: str, say):
+    """A rival below the data's resolution: never takes the name (``before``, the selection as
+    it was), ``flag`` set in its check."""
     if found.get("took_the_name"):
-        say(f"the rate limit holds the force off the measured one on {100 * frac:.2g} % of the fitted rows "
-            f"(under {100 * MIN_RATE_LIMIT_BINDING:g} %): not taken")
+        say(f"{why}: not taken")
     found["took_the_name"] = False
-    found["rarely_binding"] = True
+    found[flag] = True
     return before, found
 
 
@@ -702,9 +731,5 @@ def _unless_below_force_resolution(sel, before, found: dict, half_width_n: float
     found["force_noise_n"] = noise
     if not (np.isfinite(noise) and half_width_n < FORCE_BAND_NOISE_FACTOR * noise):
         return sel, found
-    if found.get("took_the_name"):
-        say(f"the play of {half_width_n:.3g} N is below the force's resolution ({FORCE_BAND_NOISE_FACTOR:g} x "
-            f"the force noise of {noise:.3g} N): not taken")
-    found["took_the_name"] = False
-    found["below_force_resolution"] = True
-    return before, found
+    return _refused(before, found, "below_force_resolution", f"the play of {half_width_n:.3g} N is below the "
+                    f"force's resolution ({FORCE_BAND_NOISE_FACTOR:g} x the force noise of {noise:.3g} N)", say)

@@ -31,11 +31,10 @@ import numpy as np
 from numba import njit
 
 from clutch_model.diagnosis.fitting import time_mechanism_ids
-from clutch_model.diagnosis.force_dynamics import (MAX_SUBSTEP_S, ForcePathObjective, _fit_from_best_start,
-                                                   _rival_in_place, group_delay_s, taken_out)
+from clutch_model.diagnosis.force_dynamics import (MAX_SUBSTEP_S, ForcePathObjective, ReadingObjective,
+                                                   _fit_from_best_start, _rival_in_place, group_delay_s, taken_out)
 from clutch_model.plant.mechanisms import ParamSpec
 from clutch_model.plant.params import ClutchModel
-from clutch_model.prediction import predict_campaign
 
 LAG_BOUNDS_S = (2e-3, 2.0)
 LAG_START_RATIOS = (1 / 8, 1 / 3, 1.0, 3.0, 8.0)   # the second time constant over the first, about the named delay
@@ -198,7 +197,7 @@ class ForceDependentLagObjective(ForcePathObjective):
                                             self.f_low_n, self.f_high_n)
 
 
-class AsymmetricSensorLagObjective(ForcePathObjective):
+class AsymmetricSensorLagObjective(ReadingObjective):
     """The asymmetric lag on the measurement: x = [log tau_rise, log tau_fall] then the
     friction correction; the plant is the base model's, its reading lagged."""
 
@@ -207,21 +206,9 @@ class AsymmetricSensorLagObjective(ForcePathObjective):
         super().__init__(base, campaign, fit_mask, _two_constants("tau_rise_s", "tau_fall_s", delay_s),
                          noise_sigma_nm=noise_sigma_nm, ridge_factor=ridge_factor)
 
-    def _predict_xs(self, xs) -> np.ndarray:
-        """One plant simulation per friction correction: the columns of a Jacobian that differ
-        only in the sensor's constants share it."""
+    def reading(self, plant, values) -> np.ndarray:
         pi = self._plant_inputs
-        xs = np.atleast_2d(np.asarray(xs, float))
-        out = np.empty((xs.shape[0], pi.n_rows))
-        groups: dict = {}
-        for k, x in enumerate(xs):
-            groups.setdefault(tuple(float(v) for v in x[self.n_mech:]), []).append(k)
-        for rows in groups.values():
-            plant = predict_campaign([self.model_at(xs[rows[0]])], pi, energy0_j=0.0).torque_nm[0]
-            for k in rows:
-                tau = [s.from_x(v) for s, v in zip(self.specs, xs[k, :self.n_mech])]
-                out[k] = asymmetric_lagged_torque(pi.t, plant, pi.run_start, tau[0], tau[1])
-        return out
+        return asymmetric_lagged_torque(pi.t, plant, pi.run_start, values[0], values[1])
 
 
 @dataclass(frozen=True)

@@ -26,12 +26,11 @@ import numpy as np
 from numba import njit
 
 from clutch_model.diagnosis.fitting import time_mechanism_ids
-from clutch_model.diagnosis.force_dynamics import (ForcePathObjective, _fit_from_best_start, _none_against,
+from clutch_model.diagnosis.force_dynamics import (ReadingObjective, _fit_from_best_start, _none_against,
                                                    _rival_in_place, taken_out)
 from clutch_model.diagnosis.lag_rivals import _lag_step
 from clutch_model.plant.mechanisms import ParamSpec
 from clutch_model.plant.params import ClutchModel
-from clutch_model.prediction import predict_campaign
 
 GAIN_BOUNDS_S2_PER_RAD = (-0.05, 0.05)
 TAU_BOUNDS_S = (2e-3, 0.5)
@@ -62,7 +61,7 @@ def slip_acceleration(t, slip, run_start, tau_s):
     return out
 
 
-class SlipAccelerationObjective(ForcePathObjective):
+class SlipAccelerationObjective(ReadingObjective):
     """x = [c (s^2/rad), log tau] then the friction correction; the plant is the base model's,
     its torque times 1 + c a (``slip_acceleration``)."""
 
@@ -80,21 +79,9 @@ class SlipAccelerationObjective(ForcePathObjective):
             self._accel = {key: slip_acceleration(pi.t, pi.slip, pi.run_start, key)}   # the latest only
         return self._accel[key]
 
-    def _predict_xs(self, xs) -> np.ndarray:
-        """One plant simulation per friction correction (most of a Jacobian's columns differ
-        only in c or tau and share it)."""
-        pi = self._plant_inputs
-        xs = np.atleast_2d(np.asarray(xs, float))
-        out = np.empty((xs.shape[0], pi.n_rows))
-        groups: dict = {}
-        for k, x in enumerate(xs):
-            groups.setdefault(tuple(float(v) for v in x[self.n_mech:]), []).append(k)
-        for rows in groups.values():
-            plant = predict_campaign([self.model_at(xs[rows[0]])], pi, energy0_j=0.0).torque_nm[0]
-            for k in rows:
-                gain, tau = (s.from_x(v) for s, v in zip(self.specs, xs[k, :self.n_mech]))
-                out[k] = plant * (1.0 + np.clip(gain * self.acceleration(tau), -MAX_FACTOR, MAX_FACTOR))
-        return out
+    def reading(self, plant, values) -> np.ndarray:
+        gain, tau = values
+        return plant * (1.0 + np.clip(gain * self.acceleration(tau), -MAX_FACTOR, MAX_FACTOR))
 
 
 def fit_slip_acceleration(base: ClutchModel, campaign, fit_mask, noise_sigma_nm: float = 1.0,
