@@ -27,7 +27,7 @@ from numba import njit
 
 from clutch_model.diagnosis.fitting import time_mechanism_ids
 from clutch_model.diagnosis.force_dynamics import (ReadingObjective, _fit_from_best_start, _none_against,
-                                                   _rival_in_place, taken_out)
+                                                   _refused, _rival_in_place, taken_out)
 from clutch_model.diagnosis.lag_rivals import _lag_step
 from clutch_model.plant.mechanisms import ParamSpec
 from clutch_model.plant.params import ClutchModel
@@ -37,6 +37,11 @@ TAU_BOUNDS_S = (2e-3, 0.5)
 START_TAUS_S = (0.01, 0.03, 0.1)
 START_GAINS_S2_PER_RAD = (-0.005, 0.005)
 MAX_FACTOR = 0.5          # the factor's excursion is held within 1 +- this
+# where nothing is named, the friction must cut the calibrated model's plain held-out mean square
+# by this much: on a `none` campaign of the CI (test_says_none_without_mechanism) c = -0.00085
+# s^2/rad through 90 ms cut it by 2 % (8.35 -> 8.26 N*m) at t = 5.9; the virtual car's effect
+# cut it by 86 % (30.5 -> 11.4 N*m) on lab#1
+MIN_NONE_PLAIN_CUT = 0.05
 
 
 @njit(cache=True)
@@ -131,7 +136,17 @@ def none_or_slip_acceleration(data, sel, campaign, sigma_nm: float, alpha: float
     fit = fit_slip_acceleration(sel.final.fit.model, campaign, np.asarray(data.train_mask, bool),
                                 noise_sigma_nm=sigma_nm)
     c, tau = float(fit.parameters["gain_s2_per_rad"]), float(fit.parameters["tau_s"])
-    return _none_against(data, sel, fit, "slip-acceleration friction",
-                         f"friction following the slip's acceleration ({c:+.3g} s^2/rad, low-pass {1e3 * tau:.3g} ms)",
-                         f"the friction follows the slip's acceleration ({c:+.3g} s^2/rad through a {1e3 * tau:.3g} ms "
-                         f"low-pass: frictional memory)", "slip_acceleration_friction", alpha, min_gain_frac, say)
+    before = sel
+    sel, found = _none_against(data, sel, fit, "slip-acceleration friction",
+                               f"friction following the slip's acceleration ({c:+.3g} s^2/rad, low-pass "
+                               f"{1e3 * tau:.3g} ms)",
+                               f"the friction follows the slip's acceleration ({c:+.3g} s^2/rad through a "
+                               f"{1e3 * tau:.3g} ms low-pass: frictional memory)", "slip_acceleration_friction",
+                               alpha, min_gain_frac, say)
+    cut = 1.0 - (found["held_out_rmse"] / found["calibrated_held_out_rmse"]) ** 2 \
+        if found["calibrated_held_out_rmse"] > 0 else 0.0
+    found["plain_mean_square_cut"] = float(cut)
+    if cut >= MIN_NONE_PLAIN_CUT:
+        return sel, found
+    return _refused(before, found, "immaterial", f"the slip-acceleration friction cuts the plain held-out mean "
+                    f"square by {100 * cut:.1f} % (under {100 * MIN_NONE_PLAIN_CUT:g} %)", say)
