@@ -266,7 +266,7 @@ def rival_takes_the_name(data, head, r_named, r_rival, alpha: float, min_gain_fr
       friction left 11.3 N*m against the named torque_sensor_lag's 29.0 (-85 % in plain squares)
       at block t = 2.97, p = 0.01.
 
-    Second way, first measured (actuator_second_order@car#7, ``--quick``, magnitude seed
+    The first way's plain worse-test, measured (actuator_second_order@car#7, ``--quick``, magnitude seed
     20261128: 2.76 Hz, damping 0.7, AR(1) 0.9 torque noise, four held-out spans of 3.3 s): the
     rival (2.57 Hz, 0.64) won the innovations at t = 4.5 (-4.7 %) and had the larger plain RMSE,
     10.48 against 9.70 N*m, which the blocks put at t = 0.5 (p = 0.31); a lower plain RMSE as
@@ -675,7 +675,8 @@ def _none_against(data, sel, fit, kind: str, what: str, physics: str, key: str, 
     found = {"kind": kind, "parameters": {k: float(v) for k, v in fit.parameters.items()},
              "held_out_t": float(head.t_stat), "held_out_p": float(head.p_value),
              "innovation_variance_cut": float(head.gain_frac),
-             "held_out_rmse": float(head.rmse_alt), "calibrated_held_out_rmse": float(head.rmse_null)}
+             "held_out_rmse": float(head.rmse_alt), "calibrated_held_out_rmse": float(head.rmse_null),
+             "plain_mean_square_cut": float(head.plain_gain_frac)}
     say(f"{what} against the calibrated model on held-out rows: "
         f"t = {head.t_stat:.1f}, RMSE {head.rmse_alt:.2f} vs {head.rmse_null:.2f} N*m")
     found["took_the_name"] = bool(head.significant(alpha, min_gain_frac, plain_gain=True))

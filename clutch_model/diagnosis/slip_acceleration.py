@@ -143,9 +143,7 @@ def none_or_slip_acceleration(data, sel, campaign, sigma_nm: float, alpha: float
                                f"the friction follows the slip's acceleration ({c:+.3g} s^2/rad through a "
                                f"{1e3 * tau:.3g} ms low-pass: frictional memory)", "slip_acceleration_friction",
                                alpha, min_gain_frac, say)
-    cut = 1.0 - (found["held_out_rmse"] / found["calibrated_held_out_rmse"]) ** 2 \
-        if found["calibrated_held_out_rmse"] > 0 else 0.0
-    found["plain_mean_square_cut"] = float(cut)
+    cut = found["plain_mean_square_cut"]
     if cut >= MIN_NONE_PLAIN_CUT:
         return sel, found
     return _refused(before, found, "immaterial", f"the slip-acceleration friction cuts the plain held-out mean "
