@@ -11,8 +11,49 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from clutch_model.formats.bag_reader import Campaign
+
+DIRECTION_BAND_FRAC = 0.03    # force_direction's play: this fraction of the force's 95th percentile...
+DIRECTION_BAND_NOISE = 5.0    # ...or this many force-noise sigmas, the larger
+
+
+@njit(cache=True)
+def played_force(force, run_start, half_width_n):
+    """The force through a play of constant half-width ``half_width_n``: it moves only when the
+    input leaves [x - w, x + w]; each run starts at its first force (centred in the play)."""
+    out = np.empty(force.size)
+    x = 0.0
+    for k in range(force.size):
+        if k == 0 or run_start[k]:
+            x = force[k]
+        else:
+            x = min(max(x, force[k] - half_width_n), force[k] + half_width_n)
+        out[k] = x
+    return out
+
+
+def last_move_direction(force, run_start, band_n: float) -> np.ndarray:
+    """The direction of the force's last move, in [-1, 1]: (F - play(F, b)) / b, a play of
+    half-width ``band_n`` (b) restarted at each run's start. +1 while the force rises and after
+    a rise, -1 while it falls and after a fall, in between over a reversal of less than 2 b."""
+    f = np.ascontiguousarray(np.asarray(force, float))
+    return (f - played_force(f, np.asarray(run_start, bool), float(band_n))) / float(band_n)
+
+
+def force_direction(force: np.ndarray, run_start: np.ndarray) -> np.ndarray:
+    """The direction of the force's last move (last_move_direction), with the play's half-width
+    b DIRECTION_BAND_FRAC of the force's 95th percentile or DIRECTION_BAND_NOISE force-noise
+    sigmas (first differences), the larger, so the sensor's noise does not flip it. The memory
+    a hysteresis of either sign carries: a band the pack force trails (the catalog's) or one it
+    leads (a force sensor that trails the pack force)."""
+    f = np.nan_to_num(np.asarray(force, float))
+    rs = np.asarray(run_start, bool)
+    sigma = noise_sigma(f, rs)
+    band = max(DIRECTION_BAND_FRAC * float(np.percentile(np.abs(f), 95)),
+               DIRECTION_BAND_NOISE * (sigma if np.isfinite(sigma) else 0.0), 1e-9)
+    return last_move_direction(f, rs, band)
 
 
 def _finite_rows(residual, run_start):

@@ -25,6 +25,7 @@ import numpy as np
 from numba import njit
 
 from clutch_model.diagnosis.candidates import FORCE_BAND_NOISE_FACTOR
+from clutch_model.diagnosis.features import last_move_direction, played_force
 from clutch_model.diagnosis.fitting import (N_CORR, CampaignObjective, solve_from, time_mechanism_ids,
                                             time_parameter_names)
 from clutch_model.plant.mechanisms import ParamSpec
@@ -378,21 +379,6 @@ PLAY_BOUNDS_N = (1.0, 5000.0)
 PLAY_START_QUANTILES = (0.25, 0.5, 0.75)   # the named band's half-width ratio x F at these force quantiles
 
 
-@njit(cache=True)
-def played_force(force, run_start, half_width_n):
-    """The force through a play of constant half-width ``half_width_n``: it moves only when the
-    input leaves [x - w, x + w]; each run starts at its first force (centred in the play)."""
-    out = np.empty(force.size)
-    x = 0.0
-    for k in range(force.size):
-        if k == 0 or run_start[k]:
-            x = force[k]
-        else:
-            x = min(max(x, force[k] - half_width_n), force[k] + half_width_n)
-        out[k] = x
-    return out
-
-
 class PlayObjective(ForcePathObjective):
     """The constant-width play on the force path: x = [log half-width] then the friction correction."""
 
@@ -657,6 +643,28 @@ def _refused(before, found: dict, flag: str, why: str, say):
     return before, found
 
 
+def _halves_the_plain_squares(data, head, r_null, r_alt, found: dict, key: str) -> bool:
+    """The second way a rival beats a model where nothing is named, the innovations short of
+    ``alpha`` (rival_takes_the_name's second way, at its larger cut only): the rival's
+    prediction, fitted on the training rows alone, cuts the plain held-out mean square of
+    ``r_null`` by more than LARGE_PLAIN_CUT at LARGE_CUT_ALPHA over blocks
+    (structure_test.plain_cross_fit_test), its plain held-out RMSE (``head``) the lower. A long
+    noise model forecasts a slow misfit from its own past, and a rival that leaves steps where
+    the misfit had ramps raises the innovations while it halves the plain error. Measured on
+    force_sensor_hysteresis (``--quick``, magnitude seed 20261202: a 337 N sensor play): under
+    AR(1) 0.95 torque noise the AR(30) noise model put the sensor play at t = 3.1 while it cut
+    the plain held-out RMSE from 42.6 to 27.7 N*m (p = 0.02 over 8 blocks); under 10 Hz
+    band-limited noise (AR(14)) at t = 0.5, innovations 8 % worse, while the plain RMSE fell
+    from 42.7 to 26.0 N*m (p = 0.013). Where nothing is hidden no rival cuts a quarter of it."""
+    from clutch_model.diagnosis.structure_test import plain_cross_fit_test
+
+    r_null = np.asarray(r_null, float)
+    plain = plain_cross_fit_test(r_null, r_null - np.asarray(r_alt, float), data.test_mask, data.run_start, data.t)
+    found[key] = {"cut_frac": float(plain.cut_frac), "t": float(plain.t_stat), "p": float(plain.p_value),
+                  "blocks": int(plain.n_blocks)}
+    return bool(head.rmse_alt < head.rmse_null and plain.significant(LARGE_CUT_ALPHA, LARGE_PLAIN_CUT))
+
+
 def _none_against(data, sel, fit, kind: str, what: str, physics: str, key: str, alpha: float,
                   min_gain_frac: float, say):
     """A force path beyond the catalog ``fit`` (on the calibrated model, its friction correction
@@ -664,14 +672,17 @@ def _none_against(data, sel, fit, kind: str, what: str, physics: str, key: str, 
     named -> (selection, the dict for the report). It takes the name when it predicts the
     held-out residual significantly better (at ``alpha``, ``min_gain_frac`` of the innovation
     variance, and a lower plain held-out RMSE) and beats its twin, the friction correction
-    refitted alone, the same way (the gain must be the force path's, not the refit's); the
-    verdict is then ``unexplained``, the rival's figures under ``key`` in what is left."""
-    from clutch_model.diagnosis.selection import Selection, _compare, _own_contribution, residual
+    refitted alone, the same way (the gain must be the force path's, not the refit's); or,
+    the innovations short of it, when it halves the plain held-out mean square of both
+    (``_halves_the_plain_squares``). The verdict is then ``unexplained``, the rival's figures
+    under ``key`` in what is left."""
+    from clutch_model.diagnosis.selection import Selection, _compare, _own_contribution, residual, sub_row_timing
     from clutch_model.diagnosis.structure_test import DEFAULT_MAX_ORDER
 
     train = np.asarray(data.train_mask, bool)
     model = sel.final.fit.model
-    head = _compare(data, residual(data, sel.final), residual(data, fit), DEFAULT_MAX_ORDER)
+    r_cal, r_fit = residual(data, sel.final), residual(data, fit)
+    head = _compare(data, r_cal, r_fit, DEFAULT_MAX_ORDER)
     found = {"kind": kind, "parameters": {k: float(v) for k, v in fit.parameters.items()},
              "held_out_t": float(head.t_stat), "held_out_p": float(head.p_value),
              "innovation_variance_cut": float(head.gain_frac),
@@ -680,6 +691,8 @@ def _none_against(data, sel, fit, kind: str, what: str, physics: str, key: str, 
     say(f"{what} against the calibrated model on held-out rows: "
         f"t = {head.t_stat:.1f}, RMSE {head.rmse_alt:.2f} vs {head.rmse_null:.2f} N*m")
     found["took_the_name"] = bool(head.significant(alpha, min_gain_frac, plain_gain=True))
+    if not found["took_the_name"]:
+        found["took_the_name"] = _halves_the_plain_squares(data, head, r_cal, r_fit, found, "plain_cross_fit")
     if found["took_the_name"]:
         # its twin: the friction correction refitted alone, as the rival's was, compared as
         # every candidate's
@@ -687,6 +700,11 @@ def _none_against(data, sel, fit, kind: str, what: str, physics: str, key: str, 
         own, _ = _own_contribution(data, fit, DEFAULT_MAX_ORDER)
         found["against_twin_t"] = float(own.t_stat)
         found["took_the_name"] = bool(own.significant(alpha, min_gain_frac, plain_gain=True, noise_units=True))
+        if not found["took_the_name"] and "plain_cross_fit" in found:
+            r_twin = np.asarray(data.y, float) - fit.twin_predicted
+            r_twin = r_twin - sub_row_timing(data, fit.twin_predicted, r_twin)
+            found["took_the_name"] = _halves_the_plain_squares(data, own, r_twin, r_fit, found,
+                                                              "against_twin_plain_cross_fit")
     if not found["took_the_name"]:
         return sel, found
     why = (f"{sel.reason}; but a force path beyond the catalog does: {physics} predicts the held-out "
@@ -718,6 +736,61 @@ def none_or_constant_play(data, sel, campaign, sigma_nm: float, alpha: float, mi
     sel, found = _none_against(data, sel, fit, "constant-width play", f"play of constant half-width {w:.4g} N",
                                f"the force through a play of constant half-width {w:.4g} N (backlash)",
                                "constant_width_play", alpha, min_gain_frac, say)
+    return _unless_below_force_resolution(sel, before, found, w, say)
+
+
+SENSOR_PLAY_BAND_NOISE = 5.0   # the log's last move: a play of this many force-noise sigmas (at least 1 N)
+
+
+class SensorPlayObjective(ForcePathObjective):
+    """A force sensor that reads the pack force through a play of constant half-width w (the log
+    trails the pack force on every move): the pack force is the log plus w in the direction of
+    the log's last move. x = [log w] then the friction correction; the direction is the log's,
+    fixed, so the path is linear in w."""
+
+    def __init__(self, base: ClutchModel, campaign, fit_mask, start_n: float, band_n: float,
+                 noise_sigma_nm: float = 1.0, ridge_factor: float = 1.0):
+        specs = [ParamSpec("half_width_n", True, PLAY_BOUNDS_N[0], PLAY_BOUNDS_N[1], np.array([start_n]))]
+        super().__init__(base, campaign, fit_mask, specs, noise_sigma_nm=noise_sigma_nm, ridge_factor=ridge_factor)
+        pi = self._plant_inputs
+        self._direction = last_move_direction(pi.force, pi.run_start, band_n)
+
+    def path_force(self, values) -> np.ndarray:
+        return self._plant_inputs.force + values[0] * self._direction
+
+
+def fit_sensor_play(base: ClutchModel, campaign, fit_mask, starts_n, band_n: float, noise_sigma_nm: float = 1.0,
+                    max_nfev: int = 40, ridge_factor: float = 1.0) -> ForcePathFit:
+    """The force sensor's play (SensorPlayObjective) on ``base``, jointly with the friction
+    correction, on the training rows ``fit_mask``; started from the best of ``starts_n``."""
+    obj = SensorPlayObjective(base, campaign, fit_mask, starts_n[0], band_n, noise_sigma_nm, ridge_factor)
+    return _fit_from_best_start(obj, [[math.log(w)] for w in starts_n], max_nfev, "force_sensor_play")
+
+
+def none_or_sensor_play(data, sel, campaign, sigma_nm: float, alpha: float, min_gain_frac: float,
+                        say=lambda msg: None):
+    """A selection that named nothing, checked against a force sensor that reads through a play
+    of constant width (the log trails the pack force; the pack force leads the log by w in the
+    direction of its last move) -> (selection, what the check found, or None when there was
+    nothing to check). The mirror of the constant play (the pack force trailing the log) and of
+    the catalog's hysteresis band, which also make the pack force trail: neither fits a force
+    that leads. One parameter, started from NONE_PLAY_STARTS_N, with the friction correction;
+    judged as the play is (``_none_against``, and below the force's resolution never named).
+    The log's direction comes from a play of SENSOR_PLAY_BAND_NOISE force-noise sigmas."""
+    if sel.verdict != "none":
+        return sel, None
+    say("nothing named: checking a force sensor that reads through a play (the pack force leading the log)")
+    before = sel
+    ctx = getattr(sel.final, "context", None)
+    noise = float(ctx.force_noise_n) if ctx is not None else float("nan")
+    band = max(SENSOR_PLAY_BAND_NOISE * noise, 1.0) if np.isfinite(noise) else 1.0
+    fit = fit_sensor_play(sel.final.fit.model, campaign, np.asarray(data.train_mask, bool),
+                          list(NONE_PLAY_STARTS_N), band, noise_sigma_nm=sigma_nm)
+    w = float(fit.parameters["half_width_n"])
+    sel, found = _none_against(data, sel, fit, "force sensor play", f"force sensor play of half-width {w:.4g} N",
+                               f"a force sensor reading through a play of constant half-width {w:.4g} N "
+                               f"(the pack force leads the log)", "force_sensor_play", alpha, min_gain_frac, say)
+    found["direction_band_n"] = band
     return _unless_below_force_resolution(sel, before, found, w, say)
 
 

@@ -57,6 +57,13 @@ Effects outside the catalog (``effects``: [{"name": ..., parameter: value}]):
                                      leaves [x − w, x + w] (gear or linkage backlash); mimics
                                      actuator_hysteresis, whose band F(1 ± ratio) grows with the
                                      force (a force-path effect)
+  force_sensor_hysteresis  half_width_n  the force sensor reads the pack force through a play of
+                                     constant half-width w (a sensor with mechanical
+                                     hysteresis): the logged force trails the true one by w on
+                                     every move, so the pack force leads the log; mimics
+                                     actuator_hysteresis, whose band can only trail (a
+                                     force-path effect: the plant sees the profile, the log
+                                     the played profile)
   force_sensor_offset    offset_n    the force sensor reads the force offset_n low: the pack
                                      gets the logged force + offset_n (a zero or calibration
                                      error); read high it would be the catalog's spring_preload,
@@ -141,6 +148,11 @@ EFFECTS = {
                           "mimics": "actuator_hysteresis", "catalog_equivalent": None,
                           "physics": "the pack force follows the measured force through a play of "
                                      "constant half-width half_width_n (gear or linkage backlash)"},
+    "force_sensor_hysteresis": {"kind": "force-path", "parameters": {"half_width_n": 300.0},
+                                "mimics": "actuator_hysteresis", "catalog_equivalent": None,
+                                "physics": "the force sensor reads the pack force through a play of constant "
+                                           "half-width half_width_n (sensor hysteresis): the log trails the "
+                                           "pack force on every move"},
     "force_sensor_offset": {"kind": "force-path", "parameters": {"offset_n": 500.0},
                             "mimics": "spring_preload", "catalog_equivalent": None,
                             "physics": "the force sensor reads offset_n low: the pack gets the "
@@ -681,6 +693,11 @@ def synthesize_car_logs(spec: CarLogSpec | None = None, base_model: ClutchModel 
         force_pack = _force_dependent_lagged(force_pack, run_start, float(by_force["tau_low_s"]) * spec.fine_rate_hz,
                                              float(by_force["tau_high_s"]) * spec.fine_rate_hz,
                                              float(by_force["force_ref_n"]))
+    # what the force sensor logs: the request, or the pack force through the sensor's play
+    force_logged = force_all
+    sensor_play = spec.effect_values("force_sensor_hysteresis")
+    if sensor_play is not None:
+        force_logged = _played(force_pack, run_start, float(sensor_play["half_width_n"]))
     reads_low = spec.effect_values("force_sensor_offset")
     if reads_low is not None:
         force_pack = force_pack + float(reads_low["offset_n"])
@@ -713,12 +730,12 @@ def synthesize_car_logs(spec: CarLogSpec | None = None, base_model: ClutchModel 
         [f"run_{i:02d}" for i in range(n_runs)]
     for i in range(n_runs):
         sl = slice(i * n_fine, (i + 1) * n_fine)
-        fine = {"t_s": t_run.copy(), "applied_force_n": force_all[sl], "slip_speed_rad_s": slip_all[sl],
+        fine = {"t_s": t_run.copy(), "applied_force_n": force_logged[sl], "slip_speed_rad_s": slip_all[sl],
                 "sump_temperature_c": sump_all[sl], "torque_nm": transmitted[sl],
                 "sensor_torque_nm": sensor[sl], "pack_temperature_c": plant["pack"][sl],
                 "locked": locked[sl], "plant_locked": plant["locked"][sl],
                 "static_capacity_nm": np.where(plant["locked"][sl], plant["torque"][sl], np.nan)}
-        clean_fine = {"applied_force": force_all[sl], "slip_speed": slip_all[sl],
+        clean_fine = {"applied_force": force_logged[sl], "slip_speed": slip_all[sl],
                       "sump_temperature": sump_all[sl], "measured_torque": sensor[sl],
                       "pack_temperature": plant["pack"][sl]}
         chans = [c for c in CHANNELS if c != "pack_temperature" or spec.include_pack_temperature]

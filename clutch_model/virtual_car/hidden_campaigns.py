@@ -132,6 +132,7 @@ EFFECT_RANGES = {"torque_sensor_lowpass": ("tau_s", (0.02, 0.15)),
                  "actuator_second_order": ("f_n_hz", (1.5, 4.0)),
                  "actuator_backlash": ("half_width_n", (150.0, 500.0)),
                  "force_sensor_offset": ("offset_n", (300.0, 800.0)),
+                 "force_sensor_hysteresis": ("half_width_n", (150.0, 500.0)),
                  "actuator_asymmetric_lag": ("tau_release_s", (0.12, 0.3)),
                  "actuator_force_dependent_lag": ("tau_high_s", (0.12, 0.3)),
                  "torque_sensor_asymmetric_lag": ("tau_fall_s", (0.08, 0.25)),
@@ -159,7 +160,8 @@ def _cases() -> dict:
                       "torque_ripple", "pressure_temperature_cross", "actuator_rate_limit",
                       "actuator_second_order", "actuator_backlash", "force_sensor_offset",
                       "actuator_asymmetric_lag", "actuator_force_dependent_lag",
-                      "torque_sensor_asymmetric_lag", "slip_acceleration_friction")]
+                      "torque_sensor_asymmetric_lag", "slip_acceleration_friction",
+                      "force_sensor_hysteresis")]
     return {c.name: c for c in out}
 
 

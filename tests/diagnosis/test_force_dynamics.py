@@ -181,6 +181,53 @@ def test_played_force_restarts_each_run_and_a_zero_play_is_the_force():
     np.testing.assert_array_equal(got, ref)
 
 
+def test_last_move_direction_follows_the_moves_and_not_a_small_reversal():
+    """+1 once the force has risen 2 b, -1 once it has fallen 2 b, held through a reversal
+    smaller than 2 b (a sensor's noise), 0 at each run's first row."""
+    from clutch_model.diagnosis.force_dynamics import last_move_direction
+
+    force = np.r_[np.linspace(1000, 3000, 201), np.linspace(3000, 2980, 21), np.linspace(2980, 1000, 199),
+                  np.linspace(1000, 1500, 51)]
+    run_start = np.zeros(force.size, bool)
+    run_start[[0, 421]] = True
+    d = last_move_direction(force, run_start, 50.0)
+    assert d[0] == 0.0 and d[421] == 0.0
+    np.testing.assert_allclose(d[20:201], 1.0)               # risen 100 N = 2 b by row 10
+    np.testing.assert_allclose(d[201:222], 1.0 - np.arange(21) / 50.0)   # a 20 N dip: still rising
+    np.testing.assert_allclose(d[240:421], -1.0)
+    np.testing.assert_allclose(d[440:], 1.0)                 # the second run's own rise
+
+
+def test_a_sensor_play_is_recovered_where_the_mirror_play_is_not():
+    """The force sensor reads the pack force through a play of 300 N (the log trails the pack
+    force): SensorPlayObjective's path, the log plus w in its last move's direction, fitted on
+    noise-free torque gives the play back and cuts the error of the log taken as the pack force
+    by more than 90 %; the constant play (the pack force trailing the log) fits its 1 N lower
+    bound and leaves most of it."""
+    from dataclasses import replace
+
+    from clutch_model.diagnosis.force_dynamics import fit_play, fit_sensor_play
+    from clutch_model.formats.bag_reader import Campaign
+    from clutch_model.replay import replay_runs
+    from .noise_free_campaigns import reference_campaign, with_measured_torque
+
+    model, pack = reference_campaign(3, 4, 6.0)
+    torque = replay_runs(model, pack).torque_sim
+    logged = with_measured_torque(Campaign([replace(r, applied_force_n=played_force(
+        np.asarray(r.applied_force_n, float), np.arange(len(r.applied_force_n)) == 0, 300.0))
+        for r, _ in pack.slices()]), torque)
+    every = np.ones(pack.t.size, bool)
+
+    def rmse(pred):
+        return float(np.sqrt(np.mean((np.asarray(pred) - torque) ** 2)))
+    as_logged = rmse(replay_runs(model, logged).torque_sim)
+    fit = fit_sensor_play(model, logged, every, [30.0, 150.0, 1000.0], band_n=20.0)
+    assert fit.parameters["half_width_n"] == pytest.approx(300.0, rel=0.2)
+    assert rmse(fit.predicted) < 0.1 * as_logged
+    mirror = fit_play(model, logged, every, [30.0, 150.0, 1000.0])
+    assert mirror.parameters["half_width_n"] < 10.0 and rmse(mirror.predicted) > 0.6 * as_logged
+
+
 def test_play_starts_are_the_named_band_at_the_training_forces():
     force = np.r_[np.full(100, 1000.0), np.full(100, 3000.0), np.full(100, 9000.0)]
     fit = np.ones(300, bool)

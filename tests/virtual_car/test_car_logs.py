@@ -314,6 +314,31 @@ def test_actuator_backlash_drives_the_plant_through_a_play_of_constant_width():
     assert truth["mimics"] == "actuator_hysteresis" and on.spec.expected_cause == "unexplained"
 
 
+def test_force_sensor_hysteresis_logs_the_pack_force_through_a_play_the_plant_never_sees():
+    """force_sensor_hysteresis: the plant sees the request unchanged (its torque is the
+    effect-free car's), the force sensor logs it through a play of constant half-width w
+    computed here row by row: the log trails the pack force by up to w on every move, the
+    reverse of the catalog's band, which makes the pack force trail the log."""
+    from clutch_model.virtual_car.car_logs import CarLogSpec, synthesize_car_logs
+    w = 300.0
+    base = synthesize_car_logs(CarLogSpec(seed=2, n_runs=1))
+    on = synthesize_car_logs(CarLogSpec(seed=2, n_runs=1, effects=[{"name": "force_sensor_hysteresis", "half_width_n": w}]))
+    fb, fo = base.runs[0].fine, on.runs[0].fine
+    np.testing.assert_allclose(fo["torque_nm"], fb["torque_nm"], rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose(fo["pack_temperature_c"], fb["pack_temperature_c"], rtol=1e-12, atol=1e-9)
+    request = fb["applied_force_n"]
+    logged = np.empty_like(request)
+    logged[0] = request[0]
+    for k in range(1, request.size):
+        logged[k] = min(max(logged[k - 1], request[k] - w), request[k] + w)
+    np.testing.assert_allclose(fo["applied_force_n"], logged, rtol=0, atol=1e-9)
+    assert np.max(np.abs(logged - request)) <= w + 1e-9
+    assert np.mean(np.abs(logged - request) > 0.5 * w) > 0.1     # the play is engaged much of the drive
+    truth = on.truth["effects"][0]
+    assert truth["name"] == "force_sensor_hysteresis" and truth["parameters"] == {"half_width_n": w}
+    assert truth["mimics"] == "actuator_hysteresis" and on.spec.expected_cause == "unexplained"
+
+
 def test_force_sensor_offset_drives_the_plant_with_more_force_than_logged():
     """force_sensor_offset: the force sensor reads the request, the pack gets it plus the
     offset (the plant driven with request + c gives the generated torque)."""
