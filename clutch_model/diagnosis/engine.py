@@ -927,7 +927,7 @@ def _discovered_or_force_path(data: SelectionData, sel: Selection, discovery: Di
     the unseen runs 16 % worse against the true torque."""
     found = discovery.final if discovery.final is not None else discovery.cause.fitted
     r_cal = residual(data, sel.final)
-    plain = sel if sel.verdict == "none" else replace(sel, verdict="none")   # the checks' own gate
+    plain = replace(sel, verdict="none")   # the checks' own gate
     ext = _compare(data, r_cal, residual(data, found), DEFAULT_MAX_ORDER)
     checks = {}
     for kind, check in (("band", none_or_constant_play), ("band", none_or_sensor_play),

@@ -25,7 +25,7 @@ import numpy as np
 from numba import njit
 
 from clutch_model.diagnosis.candidates import FORCE_BAND_NOISE_FACTOR
-from clutch_model.diagnosis.features import last_move_direction, played_force
+from clutch_model.diagnosis.features import DIRECTION_BAND_NOISE, last_move_direction, played_force
 from clutch_model.diagnosis.fitting import (N_CORR, CampaignObjective, solve_from, time_mechanism_ids,
                                             time_parameter_names)
 from clutch_model.plant.mechanisms import ParamSpec
@@ -619,11 +619,9 @@ def _unless_rarely_binding(sel, before, found: dict, campaign, train, rate_n_per
     1.95e5 N/s interpolated) on 6 of 30273 rows, and a 2.03e5 N/s limit, binding there alone,
     predicted the held-out residual at t = 3.7 (8.89 against 9.41 N*m): `unexplained`. A true
     23.5 kN/s limit holds the force off on about a tenth of the rows."""
-    ctx = getattr(before.final, "context", None)
-    noise = float(ctx.force_noise_n) if ctx is not None else float("nan")
     pi = PlantInputs.of(campaign)
     off = np.abs(rate_limited_force(pi.t, pi.force, pi.run_start, rate_n_per_s) - pi.force)
-    tol = max(FORCE_BAND_NOISE_FACTOR * noise, 1.0) if np.isfinite(noise) else 1.0
+    tol = _noise_band_n(_force_noise_n(before), FORCE_BAND_NOISE_FACTOR)
     rows = np.asarray(train, bool) & np.isfinite(off)
     frac = float(np.mean(off[rows] > tol)) if rows.any() else 0.0
     found["binding_row_fraction"] = frac
@@ -631,6 +629,21 @@ def _unless_rarely_binding(sel, before, found: dict, campaign, train, rate_n_per
         return sel, found
     return _refused(before, found, "rarely_binding", f"the rate limit holds the force off the measured one on "
                     f"{100 * frac:.2g} % of the fitted rows (under {100 * MIN_RATE_LIMIT_BINDING:g} %)", say)
+
+
+def _force_noise_n(*selections) -> float:
+    """The force sensor's noise (N) from the first of ``selections`` whose final fit carries a
+    candidate context (candidates.CampaignContext.force_noise_n), NaN when none does."""
+    for sel in selections:
+        ctx = getattr(sel.final, "context", None)
+        if ctx is not None:
+            return float(ctx.force_noise_n)
+    return float("nan")
+
+
+def _noise_band_n(noise_n: float, factor: float) -> float:
+    """``factor`` force-noise sigmas, at least 1 N (1 N when the noise is unknown)."""
+    return max(factor * noise_n, 1.0) if np.isfinite(noise_n) else 1.0
 
 
 def _refused(before, found: dict, flag: str, why: str, say):
@@ -676,7 +689,8 @@ def _none_against(data, sel, fit, kind: str, what: str, physics: str, key: str, 
     the innovations short of it, when it halves the plain held-out mean square of both
     (``_halves_the_plain_squares``). The verdict is then ``unexplained``, the rival's figures
     under ``key`` in what is left."""
-    from clutch_model.diagnosis.selection import Selection, _compare, _own_contribution, residual, sub_row_timing
+    from clutch_model.diagnosis.selection import (Selection, _compare, _own_contribution, residual,
+                                                  residual_of_prediction)
     from clutch_model.diagnosis.structure_test import DEFAULT_MAX_ORDER
 
     train = np.asarray(data.train_mask, bool)
@@ -701,8 +715,7 @@ def _none_against(data, sel, fit, kind: str, what: str, physics: str, key: str, 
         found["against_twin_t"] = float(own.t_stat)
         found["took_the_name"] = bool(own.significant(alpha, min_gain_frac, plain_gain=True, noise_units=True))
         if not found["took_the_name"] and "plain_cross_fit" in found:
-            r_twin = np.asarray(data.y, float) - fit.twin_predicted
-            r_twin = r_twin - sub_row_timing(data, fit.twin_predicted, r_twin)
+            r_twin = residual_of_prediction(data, fit.twin_predicted)
             found["took_the_name"] = _halves_the_plain_squares(data, own, r_twin, r_fit, found,
                                                               "against_twin_plain_cross_fit")
     if not found["took_the_name"]:
@@ -739,9 +752,6 @@ def none_or_constant_play(data, sel, campaign, sigma_nm: float, alpha: float, mi
     return _unless_below_force_resolution(sel, before, found, w, say)
 
 
-SENSOR_PLAY_BAND_NOISE = 5.0   # the log's last move: a play of this many force-noise sigmas (at least 1 N)
-
-
 class SensorPlayObjective(ForcePathObjective):
     """A force sensor that reads the pack force through a play of constant half-width w (the log
     trails the pack force on every move): the pack force is the log plus w in the direction of
@@ -776,14 +786,13 @@ def none_or_sensor_play(data, sel, campaign, sigma_nm: float, alpha: float, min_
     the catalog's hysteresis band, which also make the pack force trail: neither fits a force
     that leads. One parameter, started from NONE_PLAY_STARTS_N, with the friction correction;
     judged as the play is (``_none_against``, and below the force's resolution never named).
-    The log's direction comes from a play of SENSOR_PLAY_BAND_NOISE force-noise sigmas."""
+    The log's direction comes from a play of features.DIRECTION_BAND_NOISE force-noise sigmas
+    (at least 1 N)."""
     if sel.verdict != "none":
         return sel, None
     say("nothing named: checking a force sensor that reads through a play (the pack force leading the log)")
     before = sel
-    ctx = getattr(sel.final, "context", None)
-    noise = float(ctx.force_noise_n) if ctx is not None else float("nan")
-    band = max(SENSOR_PLAY_BAND_NOISE * noise, 1.0) if np.isfinite(noise) else 1.0
+    band = _noise_band_n(_force_noise_n(sel), DIRECTION_BAND_NOISE)
     fit = fit_sensor_play(sel.final.fit.model, campaign, np.asarray(data.train_mask, bool),
                           list(NONE_PLAY_STARTS_N), band, noise_sigma_nm=sigma_nm)
     w = float(fit.parameters["half_width_n"])
@@ -800,8 +809,7 @@ def _unless_below_force_resolution(sel, before, found: dict, half_width_n: float
     rule): it filters the force noise's reversals and is no actuator's play, so it never takes
     the name (``before``: the selection as it was). Where nothing is hidden the play fits its
     lower bound of 1 N, and its gain is the friction correction refitted with it."""
-    ctx = getattr(sel.final, "context", None) or getattr(before.final, "context", None)
-    noise = float(ctx.force_noise_n) if ctx is not None else float("nan")
+    noise = _force_noise_n(sel, before)
     found["force_noise_n"] = noise
     if not (np.isfinite(noise) and half_width_n < FORCE_BAND_NOISE_FACTOR * noise):
         return sel, found

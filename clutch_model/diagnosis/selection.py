@@ -212,12 +212,17 @@ def sub_row_timing(data: SelectionData, predicted: np.ndarray, resid: np.ndarray
     return c * dp
 
 
-def residual(data: SelectionData, fitted) -> np.ndarray:
-    """Measured minus predicted, the prediction taken at its best timing within half a row
-    interval (sub_row_timing)."""
-    pred = np.asarray(fitted.predict(data), float)
+def residual_of_prediction(data: SelectionData, predicted) -> np.ndarray:
+    """Measured minus ``predicted`` (on the data's rows), the prediction taken at its best
+    timing within half a row interval (sub_row_timing)."""
+    pred = np.asarray(predicted, float)
     r = np.asarray(data.y, float) - pred
     return r - sub_row_timing(data, pred, r)
+
+
+def residual(data: SelectionData, fitted) -> np.ndarray:
+    """Measured minus ``fitted``'s prediction (residual_of_prediction)."""
+    return residual_of_prediction(data, fitted.predict(data))
 
 
 def _below_resolution(fitted) -> str | None:
@@ -240,9 +245,7 @@ def _own_contribution(data: SelectionData, fitted, max_order):
     pred = twin() if twin is not None else None
     if pred is None:
         return False, []
-    pred = np.asarray(pred, float)
-    resid_twin = np.asarray(data.y, float) - pred
-    resid_twin = resid_twin - sub_row_timing(data, pred, resid_twin)   # at its best timing, as every model
+    resid_twin = residual_of_prediction(data, pred)   # at its best timing, as every model
     resid = residual(data, fitted)
     return _compare(data, resid_twin, resid, max_order), piece_rmse(data, resid, resid_twin)
 
