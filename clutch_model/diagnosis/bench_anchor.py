@@ -20,7 +20,15 @@ noise itself (the bench-fitted friction worse than the calibrated one on the hel
 mechanism on the bench friction, the friction left as the bench measured it, accounts for that
 discrepancy: significantly better than the bench friction alone and at least ``GAP_SHARE`` of
 the gap closed with its one parameter (the calibration's three coefficients also take up the
-bench fit's own small misfit on the car, so the mechanism may stay a little short of it). With
+bench fit's own small misfit on the car, so the mechanism may stay a little short of it), and
+what it leaves against the calibrated model is no gap by the same measure (its held-out mean
+square less than ``1 + BENCH_GAP_FRAC`` times the calibrated one's). A car driven beyond the
+bench's slip sweep puts the bench fit's extrapolation in the gap: on one 40 s drive of an
+outside generator at 44-60 rad/s (the bench swept 0-15), a true 87 ms actuator lag named, the
+bench friction with the lag was 247.8 N*m off on the held-out spans against 8.45 calibrated; a
+friction degradation beside it closed 96 % of that gap and was named, 52.3 N*m off, and the
+unseen drive's error went from 91 to 296 N*m. Where the mechanism is there, it comes to the
+calibrated model's level: 8.18 against 8.22 N*m on friction_degradation@long_drive#1. With
 one such mechanism it is named (the extended model keeps the bench's friction); with two that
 the held-out rows do not tell apart the answer is ``unexplained``.
 
@@ -142,11 +150,15 @@ class _Check:
         vs_bench = self.compare(self.r_bench, r)
         vs_cal = self.compare(r, self.r_cal)              # is the calibrated model better?
         share = _closed_share(self.gap, vs_bench)
-        ok = self.significant(vs_bench) and share >= GAP_SHARE
+        # what it leaves against the calibrated model must not be a gap by the measure that found
+        # one: a share of a gap far beyond the noise can leave a gap of its own
+        left_frac = (vs_cal.rmse_null / vs_cal.rmse_alt) ** 2 - 1.0 if vs_cal.rmse_alt > 0 else 0.0
+        ok = self.significant(vs_bench) and share >= GAP_SHARE and left_frac < BENCH_GAP_FRAC
         self.found["mechanisms"][cid] = {"parameters": {k: float(v) for k, v in fitted.parameters.items()},
                                          "held_out_rmse": float(vs_bench.rmse_alt),
                                          "against_bench_t": float(vs_bench.t_stat), "gap_closed": share,
-                                         "calibrated_better_t": float(vs_cal.t_stat), "accounts_for_it": bool(ok)}
+                                         "calibrated_better_t": float(vs_cal.t_stat), "gap_left_frac": float(left_frac),
+                                         "accounts_for_it": bool(ok)}
         say(f"  {label}: held-out RMSE {vs_bench.rmse_alt:.2f} N*m, {share:.0%} of the gap (t = {vs_bench.t_stat:.1f}); "
             f"calibrated better t = {vs_cal.t_stat:.1f}" + ("  <- accounts for it" if ok else ""))
         if ok:

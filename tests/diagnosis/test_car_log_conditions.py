@@ -292,10 +292,14 @@ def test_a_force_sensor_play_is_not_named_or_discovered(tmp_path):
 # on the car the calibration absorbed most of it, nothing was named, and the bench anchor then
 # named a 43.5 N*m torque offset on the bench friction (a wrong name; 24.3 -> 16.2 N*m on the
 # unseen runs) until a signed offset on the measured force was fitted where nothing is named and
-# in place of every named cause (diagnosis/force_dynamics.py).
-def test_a_force_sensor_offset_is_not_named_a_catalog_mechanism(tmp_path):
-    offset = 388.6939341366807
-    res, what = _diagnosed(tmp_path, "force_sensor_offset", "car", 1, {"force_sensor_offset": offset})
+# in place of every named cause (diagnosis/force_dynamics.py). At campaign seed 3 (624 N low)
+# torque_offset was named (70 N*m) and the offset on the force in its place was better on both
+# counts, each at 5 % but neither at the rival's first two bars: the innovations at t = 2.9
+# (-18 %), the plain held-out mean square -44 % at p = 0.03 (force_dynamics.rival_takes_the_name,
+# its third way since stop 56).
+@pytest.mark.parametrize("seed,offset", [(1, 388.6939341366807), (3, 623.7740378055598)])
+def test_a_force_sensor_offset_is_not_named_a_catalog_mechanism(tmp_path, seed, offset):
+    res, what = _diagnosed(tmp_path, "force_sensor_offset", "car", seed, {"force_sensor_offset": offset})
     assert res.verdict == "unexplained", what
     check = res.report["selection"]["force_offset_check"]
     assert check["took_the_name"], check
