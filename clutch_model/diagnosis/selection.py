@@ -936,13 +936,7 @@ class _Stepper:
             resid_other = residual(data, other.fitted)
             head = head_to_head(data, other.fitted, best.fitted, self.max_order, resid_null=resid_other,
                                 resid_alt=resid_best)
-            # beaten outright: better whitened without a larger plain held-out error; a best
-            # that wins the whitened errors with the larger plain error has conflicting
-            # evidence against it, as a rival has against the best (_takes_the_name).
-            # transport_delay@ar1#2 (quick, magnitude seed 20261202, a 20 ms delay, AR(1) 0.95):
-            # at ridge x10 actuator_lag beat the delay whitened (t = 2.85, p = 0.004) with a
-            # plain held-out RMSE of 8.88 against the delay's 8.82 N*m and was named (wrong)
-            if _takes_the_name(head, self.lookalike_alpha):
+            if _beats(head, self.lookalike_alpha):
                 continue
             part = parts_rivals(data, resid_other, resid_best, *dynamic_dimensions(other.fitted, best.fitted),
                                 self.max_order)
