@@ -45,6 +45,7 @@ from clutch_model.diagnosis.force_dynamics import (named_or_constant_play, named
                                                    none_or_force_offset, none_or_rate_limit)
 from clutch_model.diagnosis.lag_rivals import named_or_varying_lag
 from clutch_model.diagnosis.slip_acceleration import named_or_slip_acceleration, none_or_slip_acceleration
+from clutch_model.diagnosis.torque_line import none_or_torque_line
 from clutch_model.diagnosis.bench_anchor import named_and_bench_anchored, none_or_bench_anchored
 from clutch_model.diagnosis.fitting import CANDIDATE_IDS, CandidateFit, fit_candidate
 from clutch_model.diagnosis.friction_ridge import held_to_the_data
@@ -186,6 +187,7 @@ class Diagnosis:
     inputs: dict = field(default_factory=dict)  # the inputs' noise: slip smoothed, noise floor (input_hold.InputNoise)
     force_band_check: dict | None = None  # a named hysteresis against a constant-width play (force_dynamics.py)
     force_offset_check: dict | None = None  # the named causes against a force-sensor offset (force_dynamics.py)
+    torque_line_check: dict | None = None   # nothing named: a torque oscillation following the inputs (torque_line.py)
     lag_rival_checks: dict | None = None  # a named time mechanism against lags of two constants (lag_rivals.py)
     force_path_check: dict | None = None  # a force path beyond the catalog (force_dynamics.py): second-order
     #                                       against a named time mechanism, rate-limited where nothing is named
@@ -700,6 +702,11 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
             sel, force_offset = named_or_force_offset(data, sel, campaign, sigma_guess, ALPHA, NAMED_GAIN_FRAC, say)
         timings["bench anchor"] += time.perf_counter() - t0
 
+    # still nothing: a torque oscillation whose power follows the inputs, a judder (torque_line.py)
+    torque_line = None
+    if sel.verdict == "none" and not (discovery is not None and discovery.accepted):
+        sel, torque_line = none_or_torque_line(data, sel, campaign, ALPHA, say)
+
     # -- stage 4: extend ------------------------------------------------------------------------
     cause = {"named": None, "none": "none", "unexplained": "unexplained"}[sel.verdict]
     extended_fit = None
@@ -767,6 +774,7 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
                   inputs=inputs, force_path_check=force_dynamics, force_band_check=force_band,
                   lag_rival_checks=lag_rivals,
                   force_offset_check=force_offset,
+                  torque_line_check=torque_line,
                   bench_anchor=bench_anchor, ridged_selection=ridged.to_json() if ridged else None)
     emit("selected", diagnosis=d)
     return d

@@ -57,6 +57,10 @@ Effects outside the catalog (``effects``: [{"name": ..., parameter: value}]):
                                      leaves [x − w, x + w] (gear or linkage backlash); mimics
                                      actuator_hysteresis, whose band F(1 ± ratio) grows with the
                                      force (a force-path effect)
+  torque_judder          amplitude   transmitted torque × (1 + A·exp(−|ω|/s)·sin(2π f t + φ0)) while
+                         (frequency_hz 10, slipping, φ0 random per run: a judder (stick-slip exciting a
+                          slip_scale_rad_s 8) driveline mode), strongest at low slip; no catalog mechanism
+                                     is an oscillation
   force_sensor_hysteresis  half_width_n  the force sensor reads the pack force through a play of
                                      constant half-width w (a sensor with mechanical
                                      hysteresis): the logged force trails the true one by w on
@@ -148,6 +152,11 @@ EFFECTS = {
                           "mimics": "actuator_hysteresis", "catalog_equivalent": None,
                           "physics": "the pack force follows the measured force through a play of "
                                      "constant half-width half_width_n (gear or linkage backlash)"},
+    "torque_judder": {"kind": "plant-torque", "parameters": {"amplitude": 0.06, "frequency_hz": 10.0,
+                                                             "slip_scale_rad_s": 8.0},
+                      "mimics": None, "catalog_equivalent": None,
+                      "physics": "judder: torque x (1 + A exp(-|slip|/slip_scale) sin(2 pi f t + phi0)) while "
+                                 "slipping (stick-slip exciting a driveline mode), strongest at low slip"},
     "force_sensor_hysteresis": {"kind": "force-path", "parameters": {"half_width_n": 300.0},
                                 "mimics": "actuator_hysteresis", "catalog_equivalent": None,
                                 "physics": "the force sensor reads the pack force through a play of constant "
@@ -715,6 +724,18 @@ def synthesize_car_logs(spec: CarLogSpec | None = None, base_model: ClutchModel 
             phases.append(ph0)
             transmitted[sl] = transmitted[sl] * (1.0 + ripple["amplitude"] * np.sin(ripple["order"] * phi + ph0))
         eff_info["ripple_phases_rad"] = phases
+    judder = spec.effect_values("torque_judder")
+    if judder is not None:
+        phases = []
+        for i in range(n_runs):
+            sl = slice(i * n_fine, (i + 1) * n_fine)
+            ph0 = float(rng_eff.uniform(0, 2 * np.pi))
+            phases.append(ph0)
+            tt = t_abs[sl] - t_abs[sl][0]
+            osc = judder["amplitude"] * np.exp(-np.abs(slip_all[sl]) / judder["slip_scale_rad_s"]) \
+                * np.sin(2 * np.pi * judder["frequency_hz"] * tt + ph0)
+            transmitted[sl] = np.where(locked[sl], transmitted[sl], transmitted[sl] * (1.0 + osc))
+        eff_info["judder_phases_rad"] = phases
     sensor = np.asarray(predict_measured_torque(true_model, t_abs, transmitted, run_start), float)
     lp = spec.effect_values("torque_sensor_lowpass")
     if lp is not None:

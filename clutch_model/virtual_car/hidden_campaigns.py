@@ -133,6 +133,7 @@ EFFECT_RANGES = {"torque_sensor_lowpass": ("tau_s", (0.02, 0.15)),
                  "actuator_backlash": ("half_width_n", (150.0, 500.0)),
                  "force_sensor_offset": ("offset_n", (300.0, 800.0)),
                  "force_sensor_hysteresis": ("half_width_n", (150.0, 500.0)),
+                 "torque_judder": ("amplitude", (0.04, 0.10)),
                  "actuator_asymmetric_lag": ("tau_release_s", (0.12, 0.3)),
                  "actuator_force_dependent_lag": ("tau_high_s", (0.12, 0.3)),
                  "torque_sensor_asymmetric_lag": ("tau_fall_s", (0.08, 0.25)),
@@ -161,7 +162,7 @@ def _cases() -> dict:
                       "actuator_second_order", "actuator_backlash", "force_sensor_offset",
                       "actuator_asymmetric_lag", "actuator_force_dependent_lag",
                       "torque_sensor_asymmetric_lag", "slip_acceleration_friction",
-                      "force_sensor_hysteresis")]
+                      "force_sensor_hysteresis", "torque_judder")]
     return {c.name: c for c in out}
 
 

@@ -288,6 +288,21 @@ def test_a_force_sensor_play_is_not_named_or_discovered(tmp_path):
     assert check["held_out_rmse"] < 0.6 * check["calibrated_held_out_rmse"], check
 
 
+# A judder (the torque oscillating at 10 Hz, 4 % of it at zero slip and less as the slip grows)
+# is outside the catalog: its phase is no function of the inputs, so the flexible residual model
+# cannot predict it, and a long noise model forecasts it from its own past; an outside generator's
+# 9.8 Hz judder read `none`. Where nothing is named, a spectral line in the calibrated residual
+# whose power the inputs predict on held-out rows reads `unexplained` (diagnosis/torque_line.py).
+def test_a_judder_is_not_read_as_noise(tmp_path):
+    res, what = _diagnosed(tmp_path, "torque_judder", "car", 1, {"torque_judder": 0.04})
+    assert res.verdict == "unexplained", what
+    check = res.report["selection"]["torque_line_check"]
+    assert check["took_the_name"], check
+    assert check["frequency_hz"] == pytest.approx(10.0, abs=0.5), check
+    assert check["envelope_mean_square_cut"] > 0.5, check
+    assert "torque_line" in res.report["selection"]["closest_leaves"], res.report["selection"]["closest_leaves"]
+
+
 # A force sensor reading 389 N low is outside the catalog (read high it would be spring_preload):
 # on the car the calibration absorbed most of it, nothing was named, and the bench anchor then
 # named a 43.5 N*m torque offset on the bench friction (a wrong name; 24.3 -> 16.2 N*m on the

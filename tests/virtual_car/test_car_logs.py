@@ -339,6 +339,32 @@ def test_force_sensor_hysteresis_logs_the_pack_force_through_a_play_the_plant_ne
     assert truth["mimics"] == "actuator_hysteresis" and on.spec.expected_cause == "unexplained"
 
 
+def test_torque_judder_is_an_oscillation_strongest_at_low_slip_while_slipping():
+    """torque_judder: the transmitted torque of the effect-free car times 1 + A exp(-|w|/s)
+    sin(2 pi f t + phi0) on the slipping rows (a unit sinusoid at f once divided by the
+    envelope, fitted here), untouched while locked; the plant's heat is the effect-free car's."""
+    from clutch_model.virtual_car.car_logs import CarLogSpec, synthesize_car_logs
+    amp, f_hz, scale = 0.06, 10.0, 8.0
+    base = synthesize_car_logs(CarLogSpec(seed=2, n_runs=1))
+    on = synthesize_car_logs(CarLogSpec(seed=2, n_runs=1, effects=[{"name": "torque_judder", "amplitude": amp}]))
+    fb, fo = base.runs[0].fine, on.runs[0].fine
+    locked = fb["locked"].astype(bool)
+    assert locked.any() and (~locked).mean() > 0.5
+    np.testing.assert_array_equal(fo["torque_nm"][locked], fb["torque_nm"][locked])
+    np.testing.assert_allclose(fo["pack_temperature_c"], fb["pack_temperature_c"], rtol=1e-12, atol=1e-9)
+    ok = ~locked & (np.abs(fb["torque_nm"]) > 10.0)
+    q = fo["torque_nm"][ok] / fb["torque_nm"][ok] - 1.0
+    env = amp * np.exp(-np.abs(fb["slip_speed_rad_s"][ok]) / scale)
+    tt = (fb["t_s"] - fb["t_s"][0])[ok]
+    x = np.column_stack([env * np.sin(2 * np.pi * f_hz * tt), env * np.cos(2 * np.pi * f_hz * tt)])
+    beta, *_ = np.linalg.lstsq(x, q, rcond=None)
+    assert np.hypot(*beta) == pytest.approx(1.0, abs=1e-9)
+    np.testing.assert_allclose(x @ beta, q, rtol=0, atol=1e-9)
+    truth = on.truth["effects"][0]
+    assert truth["name"] == "torque_judder" and truth["parameters"]["frequency_hz"] == f_hz
+    assert truth["mimics"] is None and on.spec.expected_cause == "unexplained"
+
+
 def test_force_sensor_offset_drives_the_plant_with_more_force_than_logged():
     """force_sensor_offset: the force sensor reads the request, the pack gets it plus the
     offset (the plant driven with request + c gives the generated torque)."""
