@@ -50,7 +50,7 @@ def _checked(resid, t, run_start, train, test, slip, torque):
     if not ratio >= LINE_RATIO:
         return f_hz, ratio, None
     power = line_power(resid, t, run_start, train | test, f_hz)
-    env = envelope_test(power, envelope_features(torque, slip), train, test, run_start, t)
+    env = envelope_test(np.sqrt(power), envelope_features(torque, slip), train, test, run_start, t)
     return f_hz, ratio, env
 
 
