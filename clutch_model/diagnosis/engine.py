@@ -702,7 +702,7 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
             sel, force_offset = named_or_force_offset(data, sel, campaign, sigma_guess, ALPHA, NAMED_GAIN_FRAC, say)
         timings["bench anchor"] += time.perf_counter() - t0
 
-    # still nothing: a torque oscillation whose power follows the inputs, a judder (torque_line.py)
+    # still nothing: a torque oscillation whose amplitude follows the inputs, a judder (torque_line.py)
     torque_line = None
     if sel.verdict == "none" and not (discovery is not None and discovery.accepted):
         sel, torque_line = none_or_torque_line(data, sel, campaign, ALPHA, say)
