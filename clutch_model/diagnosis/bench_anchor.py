@@ -110,6 +110,12 @@ def fit_friction_level(base, ctx, mask, max_nfev: int = 20) -> FrictionLevelFit:
     return FrictionLevelFit({"shift": float(x[0])}, obj.model_at(x), obj.predict([x])[0])
 
 
+def _excess_frac(cmp) -> float:
+    """The null's held-out mean square over the alternative's, minus 1 (0 when the
+    alternative's is 0): the gap's measure."""
+    return (cmp.rmse_null / cmp.rmse_alt) ** 2 - 1.0 if cmp.rmse_alt > 0 else 0.0
+
+
 def _closed_share(cmp_gap, cmp_vs_bench) -> float:
     """Share of the held-out mean-square gap (bench -> calibrated) a mechanism closes."""
     gap = cmp_gap.rmse_null ** 2 - cmp_gap.rmse_alt ** 2
@@ -129,7 +135,7 @@ class _Check:
         self.alpha, self.min_gain_frac = alpha, min_gain_frac
         self.compare = lambda null, alt: _compare(data, null, alt, DEFAULT_MAX_ORDER)
         self.gap = gap = self.compare(r_bench, r_cal)
-        gap_frac = (gap.rmse_null / gap.rmse_alt) ** 2 - 1.0 if gap.rmse_alt > 0 else 0.0
+        gap_frac = _excess_frac(gap)
         self.absorbed = bool(gap_frac >= BENCH_GAP_FRAC and self.significant(gap))
         self.found = {**about, "bench_held_out_rmse": float(gap.rmse_null),
                       "calibrated_held_out_rmse": float(gap.rmse_alt), "calibration_t": float(gap.t_stat),
@@ -152,7 +158,7 @@ class _Check:
         share = _closed_share(self.gap, vs_bench)
         # what it leaves against the calibrated model must not be a gap by the measure that found
         # one: a share of a gap far beyond the noise can leave a gap of its own
-        left_frac = (vs_cal.rmse_null / vs_cal.rmse_alt) ** 2 - 1.0 if vs_cal.rmse_alt > 0 else 0.0
+        left_frac = _excess_frac(vs_cal)
         ok = self.significant(vs_bench) and share >= GAP_SHARE and left_frac < BENCH_GAP_FRAC
         self.found["mechanisms"][cid] = {"parameters": {k: float(v) for k, v in fitted.parameters.items()},
                                          "held_out_rmse": float(vs_bench.rmse_alt),

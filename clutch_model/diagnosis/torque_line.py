@@ -17,7 +17,7 @@ Two steps, both on what the calibrated model leaves (``none_or_torque_line``):
   grid, the rows not scored set to zero), pooled over runs, against its running median over
   LINE_SMOOTH_BINS bins in log; the largest ratio in LINE_BAND_HZ must reach LINE_RATIO. No
   sensor noise class of the virtual car makes one: on 26 `none` campaigns (13 conditions x 2
-  seeds) the largest was 6.1 (lock-up), on an outside generator's 3.7;
+  seeds) the largest was 2.1, on an outside generator's 1.5-3.1;
 - its envelope follows the inputs: the residual demodulated at the line's frequency and
   smoothed (a Gaussian of ENVELOPE_SIGMA_S) gives the line's local amplitude; a least-squares
   fit of it on the training rows to the model torque weighted by exp(-|slip|/s) for a few slip
@@ -169,44 +169,54 @@ def envelope_test(amplitude, features, train, test, run_start, t):
                                 block_s=ENVELOPE_BLOCK_S)
 
 
-def none_or_torque_line(data, sel, campaign, alpha: float, say=lambda msg: None):
-    """A selection that named nothing, checked for a torque oscillation whose amplitude follows the
-    inputs (module docstring) -> (selection, what the check found, or None when there was
-    nothing to check)."""
-    from clutch_model.diagnosis.selection import Selection, residual
-
-    if sel.verdict != "none" or sel.final is None:
-        return sel, None
-    r = residual(data, sel.final)
-    train = np.asarray(data.train_mask, bool) & np.isfinite(r)
-    test = np.asarray(data.test_mask, bool) & np.isfinite(r)
-    f_hz, ratio = residual_line(r, data.t, data.run_start, train)
+def line_check(resid, t, run_start, train, test, model_torque, slip, alpha: float) -> dict:
+    """The two steps of the module docstring on a residual -> what they found: the line
+    (``frequency_hz``, ``line_ratio``), and when it stands, the envelope test on the held-out
+    rows (``envelope_t``, ``envelope_p``, ``envelope_mean_square_cut``, ``line_amplitude_nm``);
+    ``took_the_name``: both met. ``train``, ``test``: the rows of each (finite residual)."""
+    train = np.asarray(train, bool)
+    test = np.asarray(test, bool)
+    f_hz, ratio = residual_line(resid, t, run_start, train)
     found = {"frequency_hz": f_hz, "line_ratio": ratio, "took_the_name": False}
     if not (np.isfinite(f_hz) and ratio >= LINE_RATIO):
-        return sel, found
-    say(f"nothing named: a line at {f_hz:.3g} Hz in the residual, {ratio:.0f} times the spectrum "
-        "around it: does its amplitude follow the inputs?")
-    power = line_power(r, data.t, data.run_start, train | test, f_hz)
-    model_torque = np.asarray(data.y, float) - r
-    slip = np.asarray(campaign.slip, float)
-    if slip.size != r.size:
-        return sel, found
-    feats = envelope_features(model_torque, slip)
-    env = envelope_test(np.sqrt(power), feats, train, test, data.run_start, data.t)
+        return found
+    power = line_power(resid, t, run_start, train | test, f_hz)
+    env = envelope_test(np.sqrt(power), envelope_features(model_torque, slip), train, test, run_start, t)
     found.update({"envelope_t": float(env.t_stat), "envelope_p": float(env.p_value),
                   "envelope_mean_square_cut": float(env.cut_frac),
                   "line_amplitude_nm": float(np.sqrt(np.nanmean(power[test]))) if test.any() else float("nan")})
     found["took_the_name"] = bool(env.significant(alpha, ENVELOPE_MIN_CUT)
                                   or env.significant(ENVELOPE_LARGE_CUT_ALPHA, ENVELOPE_LARGE_CUT))
-    say(f"  its amplitude predicted from the inputs on held-out rows: {100 * env.cut_frac:.0f} % of its mean "
-        f"square, t = {env.t_stat:.1f}" + ("  <- a judder" if found["took_the_name"] else ""))
+    return found
+
+
+def none_or_torque_line(data, sel, campaign, alpha: float, say=lambda msg: None):
+    """A selection that named nothing, checked for a torque oscillation whose amplitude follows the
+    inputs (``line_check``) -> (selection, what the check found, or None when there was nothing
+    to check)."""
+    from clutch_model.diagnosis.selection import Selection, leaves_of, residual
+
+    if sel.verdict != "none" or sel.final is None:
+        return sel, None
+    r = residual(data, sel.final)
+    slip = np.asarray(campaign.slip, float)
+    if slip.size != r.size:
+        return sel, None
+    train = np.asarray(data.train_mask, bool) & np.isfinite(r)
+    test = np.asarray(data.test_mask, bool) & np.isfinite(r)
+    found = line_check(r, data.t, data.run_start, train, test, np.asarray(data.y, float) - r, slip, alpha)
+    if "envelope_t" not in found:
+        return sel, found
+    f_hz, ratio, cut, t_env = (found["frequency_hz"], found["line_ratio"], found["envelope_mean_square_cut"],
+                               found["envelope_t"])
+    say(f"nothing named: a line at {f_hz:.3g} Hz in the residual, {ratio:.0f} times the spectrum around it; "
+        f"its amplitude predicted from the inputs on held-out rows: {100 * cut:.0f} % of its mean square, "
+        f"t = {t_env:.1f}" + ("  <- a judder" if found["took_the_name"] else ""))
     if not found["took_the_name"]:
         return sel, found
     why = (f"{sel.reason}; but the residual oscillates at {f_hz:.3g} Hz ({ratio:.0f} times the spectrum "
-           f"around it) with an amplitude the inputs predict on held-out rows ({100 * env.cut_frac:.0f} % of its "
-           f"mean square, t = {env.t_stat:.1f}): a torque oscillation beyond the catalog (a judder)")
-    rows = test
-    left = {"held_out_rmse": float(np.sqrt(np.mean(r[rows] ** 2))) if rows.any() else float("nan"),
-            "torque_line": found}
+           f"around it) with an amplitude the inputs predict on held-out rows ({100 * cut:.0f} % of its "
+           f"mean square, t = {t_env:.1f}): a torque oscillation beyond the catalog (a judder)")
+    left = {**leaves_of(data, r, None), "torque_line": found}
     return (Selection("unexplained", [], sel.steps, sel.final, sel.baseline_structure, sel.remainder_structure,
                       [], left, why, sel.run_level), found)

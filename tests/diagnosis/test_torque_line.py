@@ -5,8 +5,7 @@ clutch is no judder."""
 import numpy as np
 import pytest
 
-from clutch_model.diagnosis.torque_line import (LINE_RATIO, envelope_features, envelope_test, line_power,
-                                                residual_line)
+from clutch_model.diagnosis.torque_line import LINE_RATIO, line_check
 
 RATE_HZ = 200.0
 
@@ -46,22 +45,18 @@ def _judder(rng, t, run, slip, torque, f_hz=9.8, amp_frac=0.06, slip_scale=8.0):
 
 
 def _checked(resid, t, run_start, train, test, slip, torque):
-    f_hz, ratio = residual_line(resid, t, run_start, train)
-    if not ratio >= LINE_RATIO:
-        return f_hz, ratio, None
-    power = line_power(resid, t, run_start, train | test, f_hz)
-    env = envelope_test(np.sqrt(power), envelope_features(torque, slip), train, test, run_start, t)
-    return f_hz, ratio, env
+    return line_check(resid, t, run_start, train, test, torque, slip, alpha=1e-3)
 
 
 @pytest.mark.parametrize("phi", [0.0, 0.93])
 def test_a_judder_strongest_at_low_slip_is_a_line_whose_power_the_inputs_predict(phi):
     rng, t, run_start, run, train, test, slip, torque = _drive(3)
     resid = _ar1(rng, t.size, phi, 8.0) + _judder(rng, t, run, slip, torque)
-    f_hz, ratio, env = _checked(resid, t, run_start, train, test, slip, torque)
-    assert f_hz == pytest.approx(9.8, abs=0.5), (f_hz, ratio)
-    assert ratio >= LINE_RATIO
-    assert env is not None and env.cut_frac > 0.5 and env.p_value < 0.05, env
+    got = _checked(resid, t, run_start, train, test, slip, torque)
+    assert got["frequency_hz"] == pytest.approx(9.8, abs=0.5), got
+    assert got["line_ratio"] >= LINE_RATIO
+    assert got["envelope_mean_square_cut"] > 0.5 and got["envelope_p"] < 0.05, got
+    assert got["took_the_name"], got
 
 
 @pytest.mark.parametrize("kind", ["white", "ar1", "band10hz"])
@@ -76,9 +71,9 @@ def test_coloured_noise_has_no_line(kind):
     else:
         b, a = butter(2, 10.0 / (RATE_HZ / 2))
         resid = lfilter(b, a, rng.normal(0.0, 20.0, t.size))
-    f_hz, ratio, env = _checked(resid, t, run_start, train, test, slip, torque)
-    assert ratio < LINE_RATIO / 2, (kind, f_hz, ratio)
-    assert env is None
+    got = _checked(resid, t, run_start, train, test, slip, torque)
+    assert got["line_ratio"] < LINE_RATIO / 2, (kind, got)
+    assert "envelope_t" not in got and not got["took_the_name"], got
 
 
 def test_an_interference_line_that_does_not_follow_the_clutch_is_no_judder():
@@ -86,8 +81,10 @@ def test_an_interference_line_that_does_not_follow_the_clutch_is_no_judder():
     # a constant 12 Hz pick-up of 6 N*m on the torque sensor, its phase per run
     phase = rng.uniform(0, 2 * np.pi, run.max() + 1)[run]
     resid = _ar1(rng, t.size, 0.9, 8.0) + 6.0 * np.sin(2 * np.pi * 12.0 * t + phase)
-    f_hz, ratio, env = _checked(resid, t, run_start, train, test, slip, torque)
-    assert f_hz == pytest.approx(12.0, abs=0.5) and ratio >= LINE_RATIO, (f_hz, ratio)
-    assert env is not None
-    assert not (env.cut_frac > 0.5 and env.p_value < 0.05), env
-    assert not (env.cut_frac > 0.2 and env.p_value < 1e-3), env
+    got = _checked(resid, t, run_start, train, test, slip, torque)
+    assert got["frequency_hz"] == pytest.approx(12.0, abs=0.5) and got["line_ratio"] >= LINE_RATIO, got
+    assert "envelope_t" in got
+    cut, p = got["envelope_mean_square_cut"], got["envelope_p"]
+    assert not (cut > 0.5 and p < 0.05), got
+    assert not (cut > 0.2 and p < 1e-3), got
+    assert not got["took_the_name"], got
