@@ -967,3 +967,49 @@ def test_a_rival_the_replaced_cause_could_not_beat_meets_its_replacement(seed):
     assert [sc.id for sc in sel.steps[0].scores][:2] == ["E", "C"]     # C is the first rival E meets
     assert sel.verdict == "named" and sel.cause_ids == ["A", "B"], sel.reason
     assert not any(st.lookalikes for st in sel.steps), [st.lookalikes for st in sel.steps]
+
+
+def test_a_pair_that_replaced_the_first_cause_stands_on_its_second(monkeypatch):
+    """One cause named (slip_power, the truth), nothing on top of it, and a look-ahead pair that
+    replaces it: `temperature` first and a second cause C = slip_power - temperature that makes
+    up the rest. When the data do not pin C down (its interval holds 0) and C goes, the pair's
+    first cause must not be named alone -- it never met slip_power alone and loses to it; the
+    first answer comes back. Without the rule `temperature` is refitted alone, leaves structure, and
+    the answer reads `unexplained` although the one cause named first held."""
+    import clutch_model.diagnosis.selection as selection
+    from clutch_model.diagnosis.selection import Cause, SelectionStep, residual
+
+    d, names, X, train, test, cols, eps, groups = _campaign(2, "ar1_095")
+    y = 0.03 * cols["slip_power"] + eps
+    c_column = cols["slip_power"] - 0.6 * cols["temperature"] / 0.03
+    cands = [LinearCandidate("slip_power", cols["slip_power"]), LinearCandidate("temperature", cols["temperature"]),
+             LinearCandidate("C", c_column), LinearCandidate("offset", cols["offset"])]
+    data = _data(y, d, names, X, train, test, groups)
+    calls = []
+
+    def pair_in_its_place(data, resid_cur, named, step1, step2, candidates, step, cand_by_id, *args, **kwargs):
+        calls.append([c.id for c in named])
+        first = cand_by_id["temperature"].fit(TrainingSet(data, Zero(), ()))
+        second = cand_by_id["C"].fit(TrainingSet(data, first, ("temperature",)))
+        cmp1 = next(s.comparison for s in step1.scores if s.id == "temperature")
+        cmp2 = selection._compare(data, residual(data, first), residual(data, second), selection.DEFAULT_MAX_ORDER)
+        causes = [Cause("temperature", first, dict(first.parameters), {}, cmp1),
+                  Cause("C", second, dict(second.parameters), {}, cmp2)]
+        return causes, second, [SelectionStep(step1.scores, "temperature", [], look_ahead=True),
+                                SelectionStep(step2.scores, "C", [])]
+
+    real_ci95 = selection.parameter_ci95
+
+    def c_not_pinned_down(cand, *args, **kwargs):
+        return {"gain": (-1.0, 1.0)} if cand.id == "C" else real_ci95(cand, *args, **kwargs)
+
+    monkeypatch.setattr(selection, "_nearly_second", lambda step2: True)
+    monkeypatch.setattr(selection, "_backfitted_second", lambda *a, **k: None)
+    monkeypatch.setattr(selection, "_other_first", pair_in_its_place)
+    monkeypatch.setattr(selection, "parameter_ci95", c_not_pinned_down)
+    sel = select_causes(data, Zero(), cands, max_causes=2)
+    assert calls == [["slip_power"]]                    # the premise: the pair replaced the one cause
+    assert sel.verdict == "named" and sel.cause_ids == ["slip_power"], sel.reason
+    assert "replaced slip_power as the first of a pair" in sel.reason, sel.reason
+    lo, hi = sel.causes[0].parameters_ci95["gain"]
+    assert lo < 0.03 < hi
