@@ -5,7 +5,9 @@ catalog mechanisms via ``ClutchModel.with_mechanisms``, and optional effects out
 catalog) through a controller-like drive on a fine internal grid (``fine_rate_hz``, 1 kHz),
 then samples every topic on its own clock (``signals.TopicClock``: rate, phase, jitter,
 stamp quantisation) and adds each sensor's noise (``signals.Noise``: white, AR(1),
-band-limited, held, median-filtered, drifting). ``write_car_logs`` writes one rosbag2 bag per
+band-limited, held, median-filtered, drifting), the value then logged in the channel's steps
+(``resolution``, e.g. a slip in 0.01 rad/s: a locked clutch's slip reads mostly exact zeros).
+``write_car_logs`` writes one rosbag2 bag per
 run, the bench table, ``truth.yaml`` (the true model in the parameter-file schema),
 ``truth.json`` (mechanisms, effects, clocks, noise, schedule) and one sidecar
 ``truth/<run>.npz`` per run with the noise-free torque at the measured torque's own stamps.
@@ -215,6 +217,7 @@ class CarLogSpec:
     start_time_ns: int = DEFAULT_START_TIME_NS
     clocks: dict = field(default_factory=dict)      # channel -> TopicClock (defaults above)
     noise: dict = field(default_factory=dict)       # channel -> Noise (defaults above)
+    resolution: dict = field(default_factory=dict)  # channel -> the step its value is logged in (0: none)
     random_phase: bool = True                       # each topic's first sample at U(0, period)
     lockup: bool = True
     slip_sign_changes: bool = False                 # segments may change the slip's sign
@@ -770,7 +773,9 @@ def synthesize_car_logs(spec: CarLogSpec | None = None, base_model: ClutchModel 
             clean = sample_signal(t_run, clean_fine[ch], t_true)
             noise = spec.noise[ch].sample(rng_noise, t_true)
             var = float(spec.noise[ch].sigma ** 2) if ch in ("sump_temperature", "pack_temperature") else 0.0
-            series[ch] = TopicSeries(t_stamp, clean + noise, var)
+            step = float(spec.resolution.get(ch, 0.0) or 0.0)
+            logged = clean + noise if step <= 0 else np.round((clean + noise) / step) * step
+            series[ch] = TopicSeries(t_stamp, logged, var)
             truth[ch] = {"t_true_s": t_true, "t_stamp_s": t_stamp, "clean": clean, "noise": noise,
                          "phase_s": clock.phase_s}
         runs.append(CarLogRun(name=names[i], start_time_ns=start_ns[i], fine=fine,
@@ -793,6 +798,7 @@ def synthesize_car_logs(spec: CarLogSpec | None = None, base_model: ClutchModel 
         "lock_slip_rad_s": true_model.lock_slip_rad_s,
         "clocks": {ch: c.to_dict() for ch, c in spec.clocks.items()},
         "noise": {ch: n.to_dict() for ch, n in spec.noise.items()},
+        "resolution": {ch: float(q) for ch, q in spec.resolution.items()},
         "fine_rate_hz": spec.fine_rate_hz,
         "runs": [{"name": r.name, "start_time_ns": r.start_time_ns, "duration_s": dur,
                   "first_stamp_s": r.first_stamp_s,

@@ -64,6 +64,8 @@ class Condition:
     clocks: str = "lab"
     torque_noise: tuple = ("white", {})
     slip_noise: tuple | None = None
+    slip_noise_sigma: float = 0.05
+    resolution: dict | None = None      # channel -> the step its value is logged in
     lockup: bool = False
     slip_sign_changes: bool = False
     schedule: str = "short-runs"
@@ -75,9 +77,10 @@ class Condition:
         kind, opts = self.torque_noise
         noise = {"measured_torque": make_noise(kind, 8.0, **opts)}
         if self.slip_noise is not None:
-            noise["slip_speed"] = make_noise(self.slip_noise[0], 0.05, **self.slip_noise[1])
+            noise["slip_speed"] = make_noise(self.slip_noise[0], self.slip_noise_sigma, **self.slip_noise[1])
         kw = {"schedule": self.schedule, "n_runs": seen + unseen, "run_duration_s": dur,
-              "noise": noise, "lockup": self.lockup, "slip_sign_changes": self.slip_sign_changes}
+              "noise": noise, "lockup": self.lockup, "slip_sign_changes": self.slip_sign_changes,
+              "resolution": dict(self.resolution or {})}
         if self.clocks == "lab":
             kw.update(clocks=dict(LAB_CLOCKS), random_phase=False)
         return kw
@@ -107,6 +110,11 @@ CONDITIONS = {c.name: c for c in (
               size=(3, 1, 40.0), quick_size=(2, 1, 30.0)),
     Condition("lockup", "lock-up phases: slip exactly 0, the driveline sets the torque", "lockup",
               lockup=True),
+    Condition("quantised", "lock-up phases, every value logged in steps: slip 0.01 rad/s (its noise "
+                           "0.004 rad/s, below one step), torque 0.5 N·m, force 10 N; topics on their own clocks",
+              "lockup", clocks="car", lockup=True,
+              slip_noise=("white", {}), slip_noise_sigma=0.004,
+              resolution={"slip_speed": 0.01, "measured_torque": 0.5, "applied_force": 10.0}),
     Condition("sign_changes", "the slip changes sign while slipping (crossing 0 in ~0.1 s), topics on "
                               "their own clocks", "slip-sign", clocks="car", slip_sign_changes=True),
     Condition("long_drive", "one long drive in one bag (a later bag held out)", "one-bag",

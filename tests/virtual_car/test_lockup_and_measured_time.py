@@ -89,6 +89,31 @@ def test_no_lock_where_there_is_none(tmp_path_factory):
     assert not detect_lockup(t, w).mask.any()
 
 
+def test_lock_detection_on_a_slip_logged_in_coarse_steps():
+    """A slip logged in 0.01 rad/s steps whose noise while locked (0.004 rad/s) is below one
+    step reads a locked clutch as exact zeros with a stray +-0.01: the noise estimate must not
+    collapse to nothing (every stray step would then break the lock). The lock phases are found
+    as on a continuous slip; slipping stays slipping."""
+    from clutch_model.diagnosis.lockup import slip_quantum
+
+    rng = np.random.default_rng(7)
+    t = np.arange(0, 20, 0.01)                                    # slip at 100 Hz
+    locked = ((t > 5) & (t < 8)) | ((t > 12) & (t < 15.5))
+    slipping = 6 + 3 * np.sin(2 * np.pi * 0.3 * t) + rng.normal(0, 0.1, t.size)
+    w = np.round(np.where(locked, rng.normal(0, 0.004, t.size), slipping) / 0.01) * 0.01
+    assert abs(slip_quantum(w) - 0.01) < 1e-9
+    assert slip_quantum(np.where(locked, rng.normal(0, 0.004, t.size), slipping)) == 0.0   # continuous
+    det = detect_lockup(t, w)
+    found = det.at(t)
+    assert found[locked].mean() > 0.95
+    assert not found[~locked & (np.abs(t - 8) > 0.1) & (np.abs(t - 12) > 0.1)
+                     & (np.abs(t - 5) > 0.1) & (np.abs(t - 15.5) > 0.1)].any()
+    assert len(det.segments) == 2
+    # and a continuous slip with the same noise gives the same phases
+    cont = detect_lockup(t, np.where(locked, rng.normal(0, 0.004, t.size), slipping))
+    assert len(cont.segments) == 2
+
+
 def test_zero_crossings_of_a_slipping_clutch_are_found_and_left_out():
     """A slip crossing zero while slipping is no lock, but the samples around each crossing are
     rows the model is not compared on (the torque flips sign there within ms; the sampled slip
