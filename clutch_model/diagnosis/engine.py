@@ -40,7 +40,8 @@ from clutch_model.diagnosis.input_hold import decide_input_noise, with_midpoint_
 from clutch_model.diagnosis.lockup import without_locked_torque
 from clutch_model.diagnosis.run_level import within_run_forecast
 from clutch_model.diagnosis.force_dynamics import (named_or_constant_play, named_or_force_dynamics,
-                                                   named_or_force_offset, none_or_constant_play,
+                                                   named_or_force_offset, named_or_sensor_dynamics,
+                                                   none_or_constant_play,
                                                    none_or_sensor_play,
                                                    none_or_force_offset, none_or_rate_limit)
 from clutch_model.diagnosis.lag_rivals import named_or_varying_lag
@@ -602,8 +603,12 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
     # a named time mechanism against a force path beyond the catalog (force_dynamics.py)
     t0 = time.perf_counter()
     sel, force_dynamics = named_or_force_dynamics(data, sel, campaign, sigma_guess, ALPHA, NAMED_GAIN_FRAC, say)
+    # a named lag or delay on the measurement against a torque sensor of second order (force_dynamics.py)
+    sel, sensor_dynamics = named_or_sensor_dynamics(data, sel, campaign, sigma_guess, ALPHA, NAMED_GAIN_FRAC, say)
     # and against lags whose time constant is not one (lag_rivals.py)
     sel, lag_rivals = named_or_varying_lag(data, sel, campaign, sigma_guess, ALPHA, NAMED_GAIN_FRAC, say)
+    if sensor_dynamics is not None:
+        lag_rivals = {"second_order_torque_reading": sensor_dynamics, **(lag_rivals or {})}
     # and against a friction that follows the slip's acceleration (slip_acceleration.py)
     sel, slip_accel = named_or_slip_acceleration(data, sel, campaign, sigma_guess, ALPHA, NAMED_GAIN_FRAC, say)
     if slip_accel is not None:

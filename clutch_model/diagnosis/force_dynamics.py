@@ -177,6 +177,21 @@ class SecondOrderObjective(ForcePathObjective):
         return second_order_force(pi.t, pi.force, pi.run_start, values[0], values[1])
 
 
+class SecondOrderReadingObjective(ReadingObjective):
+    """A torque sensor of second order (a resonant load cell or shaft, or its anti-alias filter):
+    the reading is the plant torque through x'' = w^2 (T - x) - 2 zeta w x'. x = [log f_n, log
+    damping] then the friction correction."""
+
+    def __init__(self, base: ClutchModel, campaign, fit_mask, delay_s: float, noise_sigma_nm: float = 1.0,
+                 ridge_factor: float = 1.0):
+        super().__init__(base, campaign, fit_mask, _specs(delay_s), noise_sigma_nm=noise_sigma_nm,
+                         ridge_factor=ridge_factor)
+
+    def reading(self, plant, values) -> np.ndarray:
+        pi = self._plant_inputs
+        return second_order_force(pi.t, np.ascontiguousarray(plant, float), pi.run_start, values[0], values[1])
+
+
 @dataclass
 class ForcePathFit:
     """A force path fitted (a selection.Fitted): its parameters, the model it drives (friction
@@ -205,6 +220,15 @@ def fit_second_order(base: ClutchModel, campaign, fit_mask, delay_s: float, nois
     obj = SecondOrderObjective(base, campaign, fit_mask, delay_s, noise_sigma_nm, ridge_factor)
     starts = [[math.log(_start_f_n_hz(zeta, delay_s)), math.log(zeta)] for zeta in START_DAMPINGS]
     return _fit_from_best_start(obj, starts, max_nfev, "second_order_force_path")
+
+
+def fit_second_order_reading(base: ClutchModel, campaign, fit_mask, delay_s: float, noise_sigma_nm: float = 1.0,
+                             max_nfev: int = 40, ridge_factor: float = 1.0) -> ForcePathFit:
+    """The second-order torque reading on ``base`` (its measurement time mechanisms taken out),
+    jointly with the friction correction, as ``fit_second_order`` is fitted."""
+    obj = SecondOrderReadingObjective(base, campaign, fit_mask, delay_s, noise_sigma_nm, ridge_factor)
+    starts = [[math.log(_start_f_n_hz(zeta, delay_s)), math.log(zeta)] for zeta in START_DAMPINGS]
+    return _fit_from_best_start(obj, starts, max_nfev, "second_order_torque_reading")
 
 
 def _fit_from_best_start(obj: ForcePathObjective, starts, max_nfev: int, fit_id: str) -> ForcePathFit:
@@ -324,6 +348,38 @@ def named_or_force_dynamics(data, sel, campaign, sigma_nm: float, alpha: float, 
             f"damping {fit.parameters['damping']:.3g})")
     return _rival_in_place(data, sel, base, stand_in, fit, what, "second_order_force_path", alpha, min_gain_frac,
                            say, "the force path is not the named one's")
+
+
+MEASUREMENT_TIME_IDS = ("transport_delay", "torque_sensor_lag")
+
+
+def named_or_sensor_dynamics(data, sel, campaign, sigma_nm: float, alpha: float, min_gain_frac: float,
+                             say=lambda msg: None):
+    """A selection that named a time mechanism on the measurement (a torque-sensor lag, a
+    delay), checked against a torque sensor of second order in its place -> (selection, what the
+    check found, or None when there was nothing to check). The mirror on the measurement of the
+    second-order force path: a resonant sensor (a load cell or shaft with a light damping, or a
+    second-order anti-alias filter) overshoots the torque's edges and rings, which no
+    first-order lag or delay follows; a lag fitted to it takes its group delay, and what it
+    leaves is an oscillation a high-order noise model forecasts from its past. Judged as the
+    force path is (``_rival_in_place``): taking the name, the answer reads ``unexplained``.
+
+    Measured on an outside generator's campaign (a sensor at 6.6 Hz, damping 0.27, one 60 s
+    drive, AR(1) 0.95 torque noise): torque_sensor_lag was named at 17.5 ms and cut the unseen
+    bags' error only from 54.8 to 48.0 N*m. On a true first-order lag the second-order
+    reading at its damping bound is the lag with a fast pole beside it: it ties."""
+    timed = [i for i in (time_mechanism_ids(sel.cause_ids) if sel.verdict == "named" else [])
+             if i in MEASUREMENT_TIME_IDS]
+    if not timed:
+        return sel, None
+    stand_in, base, ridge = taken_out(sel.final, timed)
+    say(f"{', '.join(timed)} named: checking a second-order torque sensor beyond the catalog in its place")
+    fit = fit_second_order_reading(base, campaign, np.asarray(data.train_mask, bool), group_delay_s(stand_in),
+                                   noise_sigma_nm=sigma_nm, ridge_factor=ridge)
+    what = (f"second-order torque sensor (f_n {fit.parameters['f_n_hz']:.3g} Hz, "
+            f"damping {fit.parameters['damping']:.3g})")
+    return _rival_in_place(data, sel, base, stand_in, fit, what, "second_order_torque_reading", alpha,
+                           min_gain_frac, say, "the torque reading is not the named one's")
 
 
 def _rival_in_place(data, sel, base, stand_in: list, fit, what: str, key: str, alpha: float,

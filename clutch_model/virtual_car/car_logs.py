@@ -85,6 +85,11 @@ Effects outside the catalog (``effects``: [{"name": ..., parameter: value}]):
                           0.02, force_ref_n 6000)  at zero pack force to tau_high_s at force_ref_n
                                      (linear, constant beyond): a valve or motor slowing with the
                                      load; mimics actuator_lag (a force-path effect)
+  torque_sensor_resonance  f_n_hz    measured = the torque reading through a second-order
+                         (damping 0.3) low-pass of natural frequency f_n_hz and damping (a load
+                                     cell or shaft with little damping, or a second-order
+                                     anti-alias filter): it overshoots the torque's edges and
+                                     rings; mimics torque_sensor_lag (a measurement effect)
   torque_sensor_asymmetric_lag  tau_fall_s  measured = the transmitted torque through a first-order
                          (tau_rise_s   lag of tau_rise_s while the reading moves away from zero
                           0.015)       and tau_fall_s while it moves toward zero (a sensor filter
@@ -181,6 +186,11 @@ EFFECTS = {
                                                 "first-order lag whose time constant grows linearly from "
                                                 "tau_low_s at zero pack force to tau_high_s at force_ref_n "
                                                 "(a valve or motor slowing with the load)"},
+    "torque_sensor_resonance": {"kind": "measurement", "parameters": {"f_n_hz": 6.0, "damping": 0.3},
+                                "mimics": "torque_sensor_lag", "catalog_equivalent": None,
+                                "physics": "measured = the torque reading through a second-order low-pass "
+                                           "of natural frequency f_n_hz and damping (a resonant load cell "
+                                           "or shaft, or a second-order anti-alias filter)"},
     "torque_sensor_asymmetric_lag": {"kind": "measurement", "parameters": {"tau_fall_s": 0.15, "tau_rise_s": 0.015},
                                      "mimics": "torque_sensor_lag", "catalog_equivalent": None,
                                      "physics": "measured = the transmitted torque through a first-order lag "
@@ -743,6 +753,10 @@ def synthesize_car_logs(spec: CarLogSpec | None = None, base_model: ClutchModel 
     lp = spec.effect_values("torque_sensor_lowpass")
     if lp is not None:
         sensor = _lowpass_per_run(t_abs, sensor, run_start, lp["tau_s"])
+    resonance = spec.effect_values("torque_sensor_resonance")
+    if resonance is not None:
+        sensor = _second_order_per_run(np.asarray(sensor, float), run_start, float(resonance["f_n_hz"]),
+                                       float(resonance["damping"]), 1.0 / spec.fine_rate_hz)
     asym_sensor = spec.effect_values("torque_sensor_asymmetric_lag")
     if asym_sensor is not None:
         sensor = _asymmetric_sensor(np.ascontiguousarray(sensor, float), run_start,
@@ -983,7 +997,8 @@ def true_sensor_torque_at(sidecar: dict, t_s) -> np.ndarray:
 def measurement_tail_s(spec: "CarLogSpec") -> float:
     """How long the sensor keeps showing a lock phase's driveline torque after it ends under the
     spec's true measurement mechanisms and effects: the transport delay plus three torque-sensor
-    time constants (catalog torque_sensor_lag, the torque_sensor_lowpass effect)."""
+    time constants (catalog torque_sensor_lag, the torque_sensor_lowpass effect; a resonant
+    sensor's ringing envelope)."""
     tail = 0.0
     for m in spec.mechanisms:
         if m["id"] == "transport_delay":
@@ -993,6 +1008,9 @@ def measurement_tail_s(spec: "CarLogSpec") -> float:
     lowpass = spec.effect_values("torque_sensor_lowpass")
     if lowpass is not None:
         tail += 3.0 * float(lowpass["tau_s"])
+    resonance = spec.effect_values("torque_sensor_resonance")
+    if resonance is not None:       # the ringing's envelope decays with 1 / (zeta w)
+        tail += 3.0 / (float(resonance["damping"]) * 2.0 * math.pi * float(resonance["f_n_hz"]))
     return tail
 
 

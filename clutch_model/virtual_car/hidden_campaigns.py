@@ -145,6 +145,7 @@ EFFECT_RANGES = {"torque_sensor_lowpass": ("tau_s", (0.02, 0.15)),
                  "actuator_asymmetric_lag": ("tau_release_s", (0.12, 0.3)),
                  "actuator_force_dependent_lag": ("tau_high_s", (0.12, 0.3)),
                  "torque_sensor_asymmetric_lag": ("tau_fall_s", (0.08, 0.25)),
+                 "torque_sensor_resonance": ("f_n_hz", (4.0, 9.0)),
                  "slip_acceleration_friction": ("gain_s2_per_rad", (0.004, 0.012))}
 
 
@@ -170,7 +171,7 @@ def _cases() -> dict:
                       "actuator_second_order", "actuator_backlash", "force_sensor_offset",
                       "actuator_asymmetric_lag", "actuator_force_dependent_lag",
                       "torque_sensor_asymmetric_lag", "slip_acceleration_friction",
-                      "force_sensor_hysteresis", "torque_judder")]
+                      "force_sensor_hysteresis", "torque_judder", "torque_sensor_resonance")]
     return {c.name: c for c in out}
 
 
