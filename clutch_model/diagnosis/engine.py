@@ -42,7 +42,7 @@ from clutch_model.diagnosis.run_level import within_run_forecast
 from clutch_model.diagnosis.force_dynamics import (named_or_constant_play, named_or_force_dynamics,
                                                    named_or_force_offset, named_or_sensor_dynamics,
                                                    none_or_constant_play,
-                                                   none_or_sensor_play,
+                                                   none_or_force_sensor_lag, none_or_sensor_play,
                                                    none_or_force_offset, none_or_rate_limit)
 from clutch_model.diagnosis.lag_rivals import named_or_varying_lag
 from clutch_model.diagnosis.slip_acceleration import named_or_slip_acceleration, none_or_slip_acceleration
@@ -672,6 +672,8 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
         t0 = time.perf_counter()
         sel, discovery, checks = _discovered_or_force_path(data, sel, discovery, campaign, sigma_guess, say)
         force_dynamics = force_dynamics or checks.get("rate")
+        if checks.get("lag") is not None:
+            force_dynamics = {**(force_dynamics or {}), "force_sensor_lag": checks["lag"]}
         force_band = force_band or checks.get("band")
         force_offset = force_offset or checks.get("offset")
         timings["force dynamics"] += time.perf_counter() - t0
@@ -688,6 +690,10 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
         sel, sensor_play = none_or_sensor_play(data, sel, campaign, sigma_guess, ALPHA, NAMED_GAIN_FRAC, say)
         if sensor_play is not None:
             force_band = {**(force_band or {}), "force_sensor_play": sensor_play}
+        # and a force sensor that lags: the pack force leads the log
+        sel, sensor_lag = none_or_force_sensor_lag(data, sel, campaign, sigma_guess, ALPHA, NAMED_GAIN_FRAC, say)
+        if sensor_lag is not None:
+            force_dynamics = {**(force_dynamics or {}), "force_sensor_lag": sensor_lag}
         # and an offset on the measured force
         sel, reads_off = none_or_force_offset(data, sel, campaign, sigma_guess, ALPHA, NAMED_GAIN_FRAC, say)
         force_offset = force_offset or reads_off
@@ -944,7 +950,8 @@ def _discovered_or_force_path(data: SelectionData, sel: Selection, discovery: Di
     ext = _compare(data, r_cal, residual(data, found), DEFAULT_MAX_ORDER)
     checks = {}
     for kind, check in (("band", none_or_constant_play), ("band", none_or_sensor_play),
-                        ("offset", none_or_force_offset), ("rate", none_or_rate_limit)):
+                        ("offset", none_or_force_offset), ("rate", none_or_rate_limit),
+                        ("lag", none_or_force_sensor_lag)):
         rival_sel, rival = check(data, plain, campaign, sigma_nm, ALPHA, NAMED_GAIN_FRAC, say)
         if rival is None:
             continue

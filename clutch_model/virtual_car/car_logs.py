@@ -70,6 +70,10 @@ Effects outside the catalog (``effects``: [{"name": ..., parameter: value}]):
                                      actuator_hysteresis, whose band can only trail (a
                                      force-path effect: the plant sees the profile, the log
                                      the played profile)
+  force_sensor_lag       tau_s       the force sensor reads the pack force through a first-order
+                                     lag (a slow load cell or its filter): the log trails the
+                                     pack force, so the pack force leads the log; the mirror of
+                                     actuator_lag, which can only trail (a force-path effect)
   force_sensor_offset    offset_n    the force sensor reads the force offset_n low: the pack
                                      gets the logged force + offset_n (a zero or calibration
                                      error); read high it would be the catalog's spring_preload,
@@ -169,6 +173,10 @@ EFFECTS = {
                                 "physics": "the force sensor reads the pack force through a play of constant "
                                            "half-width half_width_n (sensor hysteresis): the log trails the "
                                            "pack force on every move"},
+    "force_sensor_lag": {"kind": "force-path", "parameters": {"tau_s": 0.08},
+                         "mimics": "actuator_lag", "catalog_equivalent": None,
+                         "physics": "the force sensor reads the pack force through a first-order lag of "
+                                    "tau_s: the log trails the pack force"},
     "force_sensor_offset": {"kind": "force-path", "parameters": {"offset_n": 500.0},
                             "mimics": "spring_preload", "catalog_equivalent": None,
                             "physics": "the force sensor reads offset_n low: the pack gets the "
@@ -720,6 +728,9 @@ def synthesize_car_logs(spec: CarLogSpec | None = None, base_model: ClutchModel 
     sensor_play = spec.effect_values("force_sensor_hysteresis")
     if sensor_play is not None:
         force_logged = _played(force_pack, run_start, float(sensor_play["half_width_n"]))
+    slow_sensor = spec.effect_values("force_sensor_lag")
+    if slow_sensor is not None:
+        force_logged = _lowpass_per_run(t_abs, np.asarray(force_pack, float), run_start, float(slow_sensor["tau_s"]))
     reads_low = spec.effect_values("force_sensor_offset")
     if reads_low is not None:
         force_pack = force_pack + float(reads_low["offset_n"])

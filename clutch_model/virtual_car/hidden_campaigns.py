@@ -146,6 +146,7 @@ EFFECT_RANGES = {"torque_sensor_lowpass": ("tau_s", (0.02, 0.15)),
                  "actuator_force_dependent_lag": ("tau_high_s", (0.12, 0.3)),
                  "torque_sensor_asymmetric_lag": ("tau_fall_s", (0.08, 0.25)),
                  "torque_sensor_resonance": ("f_n_hz", (4.0, 9.0)),
+                 "force_sensor_lag": ("tau_s", (0.04, 0.12)),
                  "slip_acceleration_friction": ("gain_s2_per_rad", (0.004, 0.012))}
 
 
@@ -171,7 +172,8 @@ def _cases() -> dict:
                       "actuator_second_order", "actuator_backlash", "force_sensor_offset",
                       "actuator_asymmetric_lag", "actuator_force_dependent_lag",
                       "torque_sensor_asymmetric_lag", "slip_acceleration_friction",
-                      "force_sensor_hysteresis", "torque_judder", "torque_sensor_resonance")]
+                      "force_sensor_hysteresis", "torque_judder", "torque_sensor_resonance",
+                      "force_sensor_lag")]
     return {c.name: c for c in out}
 
 
