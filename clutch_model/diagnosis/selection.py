@@ -44,7 +44,7 @@ from clutch_model.diagnosis.run_level import RunLevelResult, run_level_tests
 
 LOOKALIKE_ALPHA = 0.01   # a runner-up is a lookalike unless the best beats it at this level (one-sided)
 LOOKALIKE_P_RATIO = 10.0  # ... counted when its held-out p is below alpha or this factor times the best's
-PLAIN_RIVAL_ALPHA = 0.05  # two dynamic rivals of one dimension the whitened errors cannot part: plain squares decide
+PLAIN_RIVAL_ALPHA = 0.1   # two dynamic rivals of one dimension: plain squares over every row decide at this level
 ENCOMPASSING_ALPHA = 0.05  # ... or the held-out rows side with one in the encompassing test (parts_rivals)
 MAX_CAUSES = 3
 
@@ -802,6 +802,12 @@ def _head_to_head_winner(data, best, others, lookalike_alpha, max_order):
             elif (parts_rivals(data, resid_best, resid_other, *dynamic_dimensions(best.fitted, other.fitted), max_order)
                   and not _beats(head_to_head(data, other.fitted, best.fitted, max_order, resid_null=resid_other,
                                               resid_alt=resid_best), lookalike_alpha)):
+                wins.append((0.0, other))
+            elif plainly_better(data, resid_best, resid_other, *dynamic_dimensions(best.fitted, other.fitted)):
+                # the plain squares over every row side with the rival against the whitened
+                # errors: each whitened comparison favours its alternative (its noise model is
+                # the null's, which learns to forecast the difference), and the plain squares
+                # pointed at the true lag where the two disagreed (docstring)
                 wins.append((0.0, other))
         if not wins:
             return best
