@@ -303,6 +303,19 @@ def test_a_judder_is_not_read_as_noise(tmp_path):
     assert "torque_line" in res.report["selection"]["closest_leaves"], res.report["selection"]["closest_leaves"]
 
 
+# Every value logged in steps (slip 0.01 rad/s with 0.004 rad/s of noise, below one step): a
+# locked clutch's slip reads exact zeros with a stray +-0.01, the slip noise estimate collapsed to
+# nothing and every stray step broke the lock phases (2 % of the locked slip samples found, an
+# outside generator's campaigns read `none` or named the wrong pair) until the estimate was
+# floored at the step's quantisation noise (lockup.slip_quantum): all found, the lag named.
+def test_lock_phases_are_found_on_a_slip_logged_in_steps(tmp_path):
+    res, what = _diagnosed(tmp_path, "actuator_lag", "quantised", 2, {"actuator_lag": 0.088})
+    assert res.named == ["actuator_lag"], what
+    assert res.report["locked_rows"] > 500, res.report["locked_rows"]    # 613 of the 1600 torque rows, padded
+    tau = res.report["causes"][0]["parameters"]["tau_s"]
+    assert tau == pytest.approx(0.088, rel=0.15), tau
+
+
 # A resonant torque sensor (second order, 6.1 Hz, damping 0.3) is outside the catalog: a first-order
 # sensor lag takes its group delay and what it leaves, the ringing, a long noise model forecasts
 # from its past; an outside generator's 6.6 Hz sensor was named torque_sensor_lag (the unseen bags
