@@ -712,7 +712,17 @@ def plainly_better(data: SelectionData, resid_null, resid_alt, dim_null: int | N
     torque_sensor_lag@car#1 (t = 1.8) read `unexplained` before. The held-out RMSE must agree:
     under AR(1) 0.95 noise a sensor lag once fitted a true 70 ms actuator lag's training runs
     better (7.67 against 7.75 N*m) while the held-out run favoured the actuator lag (9.23
-    against 10.00)."""
+    against 10.00).
+
+    At p < 0.1 since stop 57, and in ``_head_to_head_winner`` also against the whitened errors:
+    each whitened comparison whitens with its null's noise model, which learns to forecast the
+    difference of the two, so it favours its alternative both ways (transport_delay@ar1#2: the
+    lag over the delay t = 2.85, the delay over the lag t = 1.36). On the first-step rivals of
+    63 single-lag cells (stop 56), wherever the whitened pick and the plain squares over every
+    row disagreed with |t| >= 1.4, the plain squares pointed at the true lag (8 of 8); on 30
+    sensor-lag and delay cells of the matrix (seed 2, 10 conditions) this mended three answers
+    (torque_sensor_lag@ar1#2 and @lowpass#2, `unexplained` before; transport_delay@ar1#2, named
+    actuator_lag before) and changed no right one."""
     if dim_null is None or dim_null != dim_alt:
         return None
     rn, ra = np.asarray(resid_null, float), np.asarray(resid_alt, float)
