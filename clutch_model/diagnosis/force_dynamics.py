@@ -28,7 +28,7 @@ from clutch_model.diagnosis.candidates import FORCE_BAND_NOISE_FACTOR
 from clutch_model.diagnosis.features import DIRECTION_BAND_NOISE, last_move_direction, played_force
 from clutch_model.diagnosis.fitting import (N_CORR, CampaignObjective, solve_from, time_mechanism_ids,
                                             time_parameter_names)
-from clutch_model.plant.mechanisms import ParamSpec
+from clutch_model.plant.mechanisms import CATALOG, ParamSpec
 from clutch_model.plant.params import ClutchModel
 from clutch_model.prediction import PlantInputs, predict_campaign
 
@@ -350,7 +350,6 @@ def named_or_force_dynamics(data, sel, campaign, sigma_nm: float, alpha: float, 
                            say, "the force path is not the named one's")
 
 
-MEASUREMENT_TIME_IDS = ("transport_delay", "torque_sensor_lag")
 RESONANT_DAMPING = 0.5   # a second-order reading takes the name only when it rings (damping below this)
 
 
@@ -375,7 +374,7 @@ def named_or_sensor_dynamics(data, sel, campaign, sigma_nm: float, alpha: float,
     torque noise) it fitted 8.1 Hz at damping 0.68 and beat the named delay at t = 3.6 for a
     held-out RMSE of 8.01 against 8.04 N*m; the resonant sensors of the matrix fit 0.26-0.28."""
     timed = [i for i in (time_mechanism_ids(sel.cause_ids) if sel.verdict == "named" else [])
-             if i in MEASUREMENT_TIME_IDS]
+             if CATALOG[i].path == "measurement"]
     if not timed:
         return sel, None
     stand_in, base, ridge = taken_out(sel.final, timed)
@@ -892,6 +891,12 @@ SENSOR_LAG_MIN_ROWS = 2.0   # a force sensor lag within this many row intervals 
 
 
 @njit(cache=True)
+def _lag_step(x, fa, slope, h, tau):
+    """x after h s of tau x' = fa + slope s - x (the input linear over the step), exactly."""
+    return fa + slope * h - slope * tau + (x - fa + slope * tau) * math.exp(-h / tau)
+
+
+@njit(cache=True)
 def led_force(t, force, run_start, tau_s, ratio):
     """The pack force a force sensor with a first-order lag ``tau_s`` read as ``force`` on the
     rows ``t``: (1 + tau s) / (1 + tau s / ratio) applied to the log, each run from its first
@@ -908,9 +913,7 @@ def led_force(t, force, run_start, tau_s, ratio):
         else:
             dt = t[k] - t[k - 1]
             if dt > 0.0:
-                f0, f1 = force[k - 1], force[k]
-                slope = (f1 - f0) / dt
-                y = f1 - slope * tau_f + (y - f0 + slope * tau_f) * math.exp(-dt / tau_f)
+                y = _lag_step(y, force[k - 1], (force[k] - force[k - 1]) / dt, dt, tau_f)
         out[k] = y + ratio * (force[k] - y)
     return out
 
@@ -955,13 +958,13 @@ def none_or_force_sensor_lag(data, sel, campaign, sigma_nm: float, alpha: float,
     A lag within SENSOR_LAG_MIN_ROWS row intervals is below the rows' timing (the model is timed
     to half a row): on run_friction_level@long_drive#8 (a friction level per drive, 200 Hz rows)
     a 2.9 ms lead took the name at t = 5.0 for 8.28 against 8.62 N*m."""
+    from clutch_model.diagnosis.selection import row_interval_s
+
     if sel.verdict != "none":
         return sel, None
     say("nothing named: checking a force sensor that lags the pack force (the pack force leading the log)")
     fit = fit_force_sensor_lag(sel.final.fit.model, campaign, np.asarray(data.train_mask, bool),
                                noise_sigma_nm=sigma_nm)
-    from clutch_model.diagnosis.selection import row_interval_s
-
     before = sel
     tau = float(fit.parameters["tau_s"])
     sel, found = _none_against(data, sel, fit, "force sensor lag", f"force sensor lag of {1e3 * tau:.3g} ms",

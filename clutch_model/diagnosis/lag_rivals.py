@@ -32,7 +32,8 @@ from numba import njit
 
 from clutch_model.diagnosis.fitting import time_mechanism_ids
 from clutch_model.diagnosis.force_dynamics import (MAX_SUBSTEP_S, ForcePathObjective, ReadingObjective,
-                                                   _fit_from_best_start, _rival_in_place, group_delay_s, taken_out)
+                                                   _fit_from_best_start, _lag_step, _rival_in_place, group_delay_s,
+                                                   taken_out)
 from clutch_model.plant.mechanisms import ParamSpec
 from clutch_model.plant.params import ClutchModel
 
@@ -40,12 +41,6 @@ LAG_BOUNDS_S = (2e-3, 2.0)
 LAG_START_RATIOS = (1 / 8, 1 / 3, 1.0, 3.0, 8.0)   # the second time constant over the first, about the named delay
 ASYMMETRY_MIN_RATIO = 1.5   # two time constants closer than this are the catalog's one lag
 FORCE_LEVEL_QUANTILES = (0.1, 0.9)   # the forces between which the force-dependent lag's constant moves
-
-
-@njit(cache=True)
-def _lag_step(x, fa, slope, h, tau):
-    """x after h s of tau x' = fa + slope s - x (the input linear over the step), exactly."""
-    return fa + slope * h - slope * tau + (x - fa + slope * tau) * math.exp(-h / tau)
 
 
 @njit(cache=True)

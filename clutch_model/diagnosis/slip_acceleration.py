@@ -28,7 +28,7 @@ from numba import njit
 from clutch_model.diagnosis.fitting import time_mechanism_ids
 from clutch_model.diagnosis.force_dynamics import (ReadingObjective, _fit_from_best_start, _none_against,
                                                    _refused, _rival_in_place, taken_out)
-from clutch_model.diagnosis.lag_rivals import _lag_step
+from clutch_model.diagnosis.force_dynamics import _lag_step
 from clutch_model.plant.mechanisms import ParamSpec
 from clutch_model.plant.params import ClutchModel
 
