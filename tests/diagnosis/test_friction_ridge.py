@@ -114,3 +114,38 @@ def test_the_car_calibration_is_not_bent_to_coloured_noise(tmp_path):
     calibrated = unseen_stamps_rmse_nm(camp, tmp_path / "diag" / "calibrated_model.yaml", runs)
     assert calibrated < 2.0 * true, (calibrated, true)
     assert json.loads((tmp_path / "campaign" / "truth.json").read_text())["expected_cause"] == "none"
+
+
+def test_a_name_whose_written_extension_loses_on_the_held_out_rows_reads_unexplained():
+    """The extension written with the named causes (its friction correction refitted at the data's
+    ridge) must predict the held-out rows at least as well as the calibrated model: one that fits
+    the fitted rows better but the held-out rows worse (an over-flexible correction extrapolated)
+    is no name; one better on the held-out rows keeps it."""
+    from types import SimpleNamespace
+
+    from clutch_model.diagnosis.engine import _rmse, extension_holds
+    from clutch_model.diagnosis.selection import Selection
+
+    rng = np.random.default_rng(5)
+    n = 4000
+    held_out = np.zeros(n, bool)
+    held_out[3000:] = True
+    noise = rng.normal(0.0, 8.0, n)
+    calibrated_resid = noise + 6.0 * np.sin(np.linspace(0.0, 40.0, n))   # structure everywhere
+    calibrated_rmse = _rmse(calibrated_resid, held_out)
+    overfit = np.where(held_out, calibrated_resid + 10.0, noise)          # fitted rows explained, held-out off
+    holds = noise.copy()                                                  # the structure explained everywhere
+    said = []
+    named = Selection("named", [SimpleNamespace(id="torque_sensor_lag")], [], None, None, None, [], {},
+                      "what remains is indistinguishable from noise on held-out data")
+
+    sel, fit = extension_holds(named, SimpleNamespace(residual=overfit), held_out, calibrated_rmse, said.append)
+    assert fit is None and sel.verdict == "unexplained" and sel.causes == []
+    assert sel.closest == ["torque_sensor_lag"]
+    assert sel.closest_leaves["held_out_rmse"] == pytest.approx(_rmse(overfit, held_out))
+    assert sel.closest_leaves["held_out_rmse"] > calibrated_rmse and "no name holds" in sel.reason
+    assert said and "torque_sensor_lag" in said[0]
+
+    kept = SimpleNamespace(residual=holds)
+    sel, fit = extension_holds(named, kept, held_out, calibrated_rmse, said.append)
+    assert sel is named and fit is kept
