@@ -27,16 +27,21 @@ at it. Its answer is taken only when
   correction would have held is left to the candidates, and one of them can take a sliver of
   it: a 6 N spring preload beside a friction degradation under a 60 s sample (white noise)
   cut the innovation variance by 0.6 % against the first selection's model (t = 4.5); the
-  drag absorbed on the quick car cut it by 8.6 % (plain RMSE 11.8 -> 8.1 N*m).
+  drag absorbed on the quick car cut it by 8.6 % (plain RMSE 11.8 -> 8.1 N*m). Or, where the
+  noise model forecasts the misfit the first left from its own past (a residual that is mostly
+  a slow missing cause), it halves the plain held-out mean square of the first's model and of
+  its own baseline, significantly over held-out blocks (``against_first``).
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
+
 from clutch_model.diagnosis.candidates import MechanismCandidate, baseline_fit
 from clutch_model.diagnosis.friction_ridge import ridge_label
 from clutch_model.diagnosis.selection import _compare, residual
-from clutch_model.diagnosis.structure_test import DEFAULT_MAX_ORDER
+from clutch_model.diagnosis.structure_test import DEFAULT_MAX_ORDER, plain_worse_test
 
 
 @dataclass
@@ -63,13 +68,55 @@ def names_more(first, second) -> bool:
     return second.verdict == "named" and a < b
 
 
-def against_first(data, first, second, alpha: float, min_gain_frac: float) -> tuple:
+PLAIN_ROUTE_CUT = 0.5        # ... or it halves the first's plain held-out mean square
+PLAIN_ROUTE_ALPHA = 0.05     # significantly over held-out blocks (the none path's rivals' bar)
+PLAIN_ROUTE_BLOCK_S = 5.0    # of this length (a slow misfit's errors are correlated within)
+
+
+def halves_in_plain_squares(data, resid_null, resid_alt):
+    """The alternative halves the null's plain held-out mean square, its squared errors the
+    smaller over held-out blocks of PLAIN_ROUTE_BLOCK_S at PLAIN_ROUTE_ALPHA -> (bool, cut,
+    the block test)."""
+    rn, ra = np.asarray(resid_null, float), np.asarray(resid_alt, float)
+    test = np.asarray(data.test_mask, bool) & np.isfinite(rn) & np.isfinite(ra)
+    if not test.any():
+        return False, 0.0, None
+    cut = 1.0 - float(np.mean(ra[test] ** 2) / np.mean(rn[test] ** 2))
+    block = plain_worse_test(ra, rn, data.test_mask, data.run_start, data.t, block_s=PLAIN_ROUTE_BLOCK_S)
+    return bool(cut >= PLAIN_ROUTE_CUT and block.p_value < PLAIN_ROUTE_ALPHA), cut, block
+
+
+def against_first(data, first, second, alpha: float, min_gain_frac: float, second_base=None) -> tuple:
     """(the second selection's final model predicts the held-out residual significantly better
-    than the first's, the comparison for the report)."""
-    head = _compare(data, residual(data, first.final), residual(data, second.final), DEFAULT_MAX_ORDER)
+    than the first's, the comparison for the report).
+
+    Better in whitened terms at ``alpha``, or, when the noise model forecasts the misfit from
+    its own past, in the torque's own units: the second's model halves the first's plain
+    held-out mean square and its own baseline's (``second_base``: the causes, not the ridge, do
+    it), each significantly over held-out blocks (``halves_in_plain_squares``: the bar a rival
+    meets on the none path), with the whitened errors on its side (t > 0). Measured on an
+    outside generator's long drives (two bags of 81 and 95 s at 1000 Hz, Student-t and AR(1)
+    torque noise of 4.9 N*m RMS): a friction degradation of 7.4e5 J left the calibrated model
+    27.5 N*m off; the selection at ridge x inf named it (7.6e5 J) and cut the held-out RMSE from
+    26.8 to 10.8 N*m (plain mean square -84 %, block t = 2.3 over 12 blocks of 5 s), but the
+    AR(48) noise model, fitted to a residual that was mostly the missing wear, forecast the
+    misfit so well that the whitened t was 3.05 (p = 0.0011), and the answer stayed
+    `unexplained`. Drifting noise does not meet the plain bar: what a fit on the training spans
+    predicts of a random drift on the held-out spans is a fraction of the drift, not half of
+    the residual."""
+    resid_first, resid_second = residual(data, first.final), residual(data, second.final)
+    head = _compare(data, resid_first, resid_second, DEFAULT_MAX_ORDER)
     ok = head.significant(alpha, min_gain_frac, plain_gain=True, noise_units=True, plain_material=True)
-    return ok, {"held_out_t": float(head.t_stat), "innovation_variance_cut": float(head.gain_frac),
-                "held_out_rmse": float(head.rmse_alt), "first_held_out_rmse": float(head.rmse_null)}
+    halves, cut, block = halves_in_plain_squares(data, resid_first, resid_second)
+    if halves and second_base is not None:
+        halves = halves_in_plain_squares(data, residual(data, second_base), resid_second)[0]
+    plain_ok = bool(halves and head.t_stat > 0)
+    info = {"held_out_t": float(head.t_stat), "innovation_variance_cut": float(head.gain_frac),
+            "held_out_rmse": float(head.rmse_alt), "first_held_out_rmse": float(head.rmse_null),
+            "plain_mean_square_cut": float(cut), "plain_block_t": float(block.t_stat) if block else 0.0,
+            "plain_block_p": float(block.p_value) if block else 1.0, "plain_blocks": int(block.n_blocks) if block else 0,
+            "taken_in_plain_squares": bool(plain_ok and not ok)}
+    return ok or plain_ok, info
 
 
 def selection_at_the_data_ridge(select, data, first, written, cal_base, ctx, ids, ridge, mask, alpha: float,
@@ -93,10 +140,11 @@ def selection_at_the_data_ridge(select, data, first, written, cal_base, ctx, ids
     if not names_more(first, second):
         say(line + "; the first selection kept")
         return first, None, None, None, info
-    better, info.against_first = against_first(data, first, second, alpha, min_gain_frac)
+    better, info.against_first = against_first(data, first, second, alpha, min_gain_frac, second_base=base_r)
     head = info.against_first
     say(f"{line}; against the first's model on held-out rows: t = {head['held_out_t']:.1f}, RMSE "
-        f"{head['held_out_rmse']:.2f} vs {head['first_held_out_rmse']:.2f} N*m"
+        f"{head['held_out_rmse']:.2f} vs {head['first_held_out_rmse']:.2f} N*m (plain squares: "
+        f"{100 * head['plain_mean_square_cut']:.0f} % cut at block t = {head['plain_block_t']:.1f})"
         + ("; taken" if better else "; the first selection kept"))
     if not better:
         return first, None, None, None, info
