@@ -43,7 +43,7 @@ from clutch_model.diagnosis.force_dynamics import (named_or_constant_play, named
                                                    named_or_force_offset, named_or_sensor_dynamics,
                                                    none_or_constant_play,
                                                    none_or_force_sensor_lag, none_or_sensor_play,
-                                                   none_or_force_offset, none_or_rate_limit)
+                                                   none_or_force_offset, none_or_rate_limit, named_or_rate_limit)
 from clutch_model.diagnosis.lag_rivals import named_or_varying_lag
 from clutch_model.diagnosis.slip_acceleration import named_or_slip_acceleration, none_or_slip_acceleration
 from clutch_model.diagnosis.torque_line import none_or_torque_line
@@ -627,6 +627,10 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
     # a named time mechanism against a force path beyond the catalog (force_dynamics.py)
     t0 = time.perf_counter()
     sel, force_dynamics = named_or_force_dynamics(data, sel, campaign, sigma_guess, ALPHA, NAMED_GAIN_FRAC, say)
+    # a named actuator lag against a slew-rate-limited force path (force_dynamics.py)
+    sel, rate_limit = named_or_rate_limit(data, sel, campaign, sigma_guess, ALPHA, NAMED_GAIN_FRAC, say)
+    if rate_limit is not None:
+        force_dynamics = {**(force_dynamics or {}), "rate_limited_force_path": rate_limit}
     # a named lag or delay on the measurement against a torque sensor of second order (force_dynamics.py)
     sel, sensor_dynamics = named_or_sensor_dynamics(data, sel, campaign, sigma_guess, ALPHA, NAMED_GAIN_FRAC, say)
     # and against lags whose time constant is not one (lag_rivals.py)

@@ -635,10 +635,11 @@ def rate_limited_force(t, force, run_start, rate_n_per_s):
 class RateLimitObjective(ForcePathObjective):
     """The slew-rate-limited force path: x = [log rate] then the friction correction."""
 
-    def __init__(self, base: ClutchModel, campaign, fit_mask, noise_sigma_nm: float = 1.0):
+    def __init__(self, base: ClutchModel, campaign, fit_mask, noise_sigma_nm: float = 1.0,
+                 ridge_factor: float = 1.0):
         specs = [ParamSpec("rate_n_per_s", True, RATE_BOUNDS_N_PER_S[0], RATE_BOUNDS_N_PER_S[1],
                            np.array([START_RATES_N_PER_S[1]]))]
-        super().__init__(base, campaign, fit_mask, specs, noise_sigma_nm=noise_sigma_nm)
+        super().__init__(base, campaign, fit_mask, specs, noise_sigma_nm=noise_sigma_nm, ridge_factor=ridge_factor)
 
     def path_force(self, values) -> np.ndarray:
         pi = self._plant_inputs
@@ -646,10 +647,10 @@ class RateLimitObjective(ForcePathObjective):
 
 
 def fit_rate_limit(base: ClutchModel, campaign, fit_mask, noise_sigma_nm: float = 1.0,
-                   max_nfev: int = 40) -> ForcePathFit:
+                   max_nfev: int = 40, ridge_factor: float = 1.0) -> ForcePathFit:
     """The slew-rate-limited force path on ``base``, jointly with the friction correction, on
     the training rows ``fit_mask``; started from the best of START_RATES_N_PER_S."""
-    obj = RateLimitObjective(base, campaign, fit_mask, noise_sigma_nm)
+    obj = RateLimitObjective(base, campaign, fit_mask, noise_sigma_nm, ridge_factor)
     return _fit_from_best_start(obj, [[math.log(r)] for r in START_RATES_N_PER_S], max_nfev,
                                 "rate_limited_force_path")
 
@@ -683,6 +684,34 @@ def none_or_rate_limit(data, sel, campaign, sigma_nm: float, alpha: float, min_g
     sel, found = _none_against(data, sel, fit, "rate-limited force path", f"rate-limited force path ({rate:.3g} N/s)",
                                f"the force slewed at most {rate:.3g} N/s toward the measured one (a rate-limited "
                                f"actuator)", "rate_limited_force_path", alpha, min_gain_frac, say)
+    return _unless_rarely_binding(sel, before, found, campaign, train, rate, say)
+
+
+def named_or_rate_limit(data, sel, campaign, sigma_nm: float, alpha: float, min_gain_frac: float,
+                        say=lambda msg: None):
+    """A selection that named an actuator lag, checked against a slew-rate-limited force path in
+    its place -> (selection, what the check found, or None when there was nothing to check).
+    Both make the pack force trail the measured one; a first-order lag trails every edge in
+    proportion, a slew limit only the fast, large ones, at one slope. Judged as the other
+    rivals in a named mechanism's place (``_rival_in_place``); taking the name, the answer
+    reads ``unexplained``, unless the limit rarely binds (``_unless_rarely_binding``).
+
+    Measured on actuator_rate_limit@car#3 (``--quick``, magnitude seed 20261205: unaligned
+    topics, AR(1) 0.9 torque and slip noise, lock-up, few long runs): actuator_lag was named,
+    a wrong name, since only the none path met the rate limit."""
+    if sel.verdict != "named" or "actuator_lag" not in sel.cause_ids:
+        return sel, None
+    stand_in, base, ridge = taken_out(sel.final, ["actuator_lag"])
+    say("actuator_lag named: checking a slew-rate-limited force path beyond the catalog in its place")
+    train = np.asarray(data.train_mask, bool)
+    fit = fit_rate_limit(base, campaign, train, noise_sigma_nm=sigma_nm, ridge_factor=ridge)
+    rate = float(fit.parameters["rate_n_per_s"])
+    before = sel
+    sel, found = _rival_in_place(data, sel, base, stand_in, fit, f"rate-limited force path ({rate:.3g} N/s)",
+                                 "rate_limited_force_path", alpha, min_gain_frac, say,
+                                 "the force path slews at a bounded rate, which no catalog lag does")
+    if not found.get("took_the_name"):
+        return sel, found
     return _unless_rarely_binding(sel, before, found, campaign, train, rate, say)
 
 

@@ -429,6 +429,20 @@ def test_rate_limited_actuator_is_found_beyond_the_catalog(tmp_path):
     assert check["held_out_rmse"] < 10.0, check
 
 
+# The same slew limit (26.6 kN/s) on the car (unaligned topics, AR(1) 0.9 torque and slip noise,
+# lock-up, few long runs): actuator_lag was named, a wrong name, while the rate limit met only
+# the none path; a named actuator lag now meets a rate-limited force path in its place
+# (force_dynamics.named_or_rate_limit: 25.5 kN/s, held-out 28.9 -> 8.0 N*m).
+def test_rate_limited_actuator_is_not_named_an_actuator_lag_on_the_car(tmp_path):
+    rate = 26632.070673524533
+    res, what = _diagnosed(tmp_path, "actuator_rate_limit", "car", 3, {"actuator_rate_limit": rate})
+    assert res.verdict == "unexplained", what
+    check = res.report["selection"]["force_path_check"]["rate_limited_force_path"]
+    assert check["took_the_name"] and check["in_place_of"] == ["actuator_lag"], check
+    assert check["parameters"]["rate_n_per_s"] == pytest.approx(rate, rel=0.15), check
+    assert check["held_out_rmse"] < 0.5 * check["named_held_out_rmse"], check
+
+
 # An actuator lag with a transport delay (54 + 96 ms): the lag named first took up the pair's
 # group delay, a delay fitted on top of it as it was only added delay, and the delay alone was
 # named (lab#3, ar1#3 of the matrix; a missed second cause) until a time mechanism fitted on
