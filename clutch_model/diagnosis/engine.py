@@ -463,13 +463,21 @@ def _candidate_tail_s(cid: str, fitted) -> float:
 
 
 def with_lock_tail(campaign: Campaign, lock_results: list, tail_s: float) -> tuple:
-    """(campaign with the measured torque NaN also ``tail_s`` past each lock phase's padded end,
-    the rows newly left out)."""
+    """(campaign with the measured torque NaN also ``tail_s`` past each lock phase's padded end
+    and past each zero crossing's window, the rows newly left out). A delayed or low-passed
+    reading flips after the slip does, and the flip's instant is as uncertain there as at the
+    slip's crossing: on an outside generator's delay (26.6 ms) with a friction degradation and
+    slip sign flips, the rows just after each crossing window were off by hundreds of N*m for a
+    0.8 ms error in the fitted delay, and a drag of 0.040 N*m/(rad/s) was named as a third
+    cause on them."""
     runs, more = [], []
     for run, res in zip(campaign.runs, lock_results):
         extra = np.zeros(run.t.size, bool)
         for a, b in res.segments:
             extra |= (run.t > b) & (run.t <= b + LOCK_PAD_S + tail_s)
+        for a, b in res.crossings:
+            # the measured torque flips that much after the slip: its uncertain instant with it
+            extra |= (run.t > b) & (run.t <= b + tail_s)
         if run.torque_measured_nm is not None:
             extra &= np.isfinite(run.torque_measured_nm)
             if extra.any():

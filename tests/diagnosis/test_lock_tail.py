@@ -53,6 +53,21 @@ def test_with_lock_tail_leaves_out_only_the_rows_after_each_phase():
     assert np.array_equal(wider.runs[1].torque_measured_nm, camp.runs[1].torque_measured_nm)
 
 
+def test_with_lock_tail_also_follows_each_zero_crossing_of_the_slip():
+    """A delayed or low-passed reading flips after the slip: the tail is left out past each zero
+    crossing's window too (the window itself was left out before), and nowhere else."""
+    t = np.arange(0.005, 4.0, 0.01)
+    window = (2.0, 2.06)
+    torque = np.where((t >= window[0]) & (t <= window[1]), np.nan, 100.0)
+    camp = Campaign([_run("a", t, torque.copy())])
+    locks = [LockupResult(np.zeros(t.size, bool), [], 0.01, 0.03, 0.045, crossings=[window])]
+    wider, more = with_lock_tail(camp, locks, 0.1)
+    newly = (t > window[1]) & (t <= window[1] + 0.1)
+    assert newly.sum() == 10
+    assert np.array_equal(np.isnan(wider.runs[0].torque_measured_nm), np.isnan(torque) | newly)
+    assert np.array_equal(more, newly)
+
+
 def test_truth_scoring_leaves_out_the_sensor_tail():
     ft = np.arange(0.0, 3.0, 0.001)
     side = {"fine_t_s": ft, "fine_locked": ((ft >= 1.0) & (ft <= 1.5)).astype(np.int8)}
