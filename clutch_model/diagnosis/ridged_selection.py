@@ -41,7 +41,8 @@ import numpy as np
 from clutch_model.diagnosis.candidates import MechanismCandidate, baseline_fit
 from clutch_model.diagnosis.friction_ridge import ridge_label
 from clutch_model.diagnosis.selection import _compare, residual
-from clutch_model.diagnosis.structure_test import DEFAULT_MAX_ORDER, plain_worse_test
+from clutch_model.diagnosis.force_dynamics import LARGE_CUT_ALPHA, LARGE_PLAIN_CUT
+from clutch_model.diagnosis.structure_test import DEFAULT_MAX_ORDER, plain_cross_fit_test
 
 
 @dataclass
@@ -68,22 +69,18 @@ def names_more(first, second) -> bool:
     return second.verdict == "named" and a < b
 
 
-PLAIN_ROUTE_CUT = 0.5        # ... or it halves the first's plain held-out mean square
-PLAIN_ROUTE_ALPHA = 0.05     # significantly over held-out blocks (the none path's rivals' bar)
-PLAIN_ROUTE_BLOCK_S = 5.0    # of this length (a slow misfit's errors are correlated within)
+PLAIN_ROUTE_BLOCK_S = 5.0    # held-out blocks of the plain route (a slow misfit's errors are correlated within)
 
 
-def halves_in_plain_squares(data, resid_null, resid_alt):
-    """The alternative halves the null's plain held-out mean square, its squared errors the
-    smaller over held-out blocks of PLAIN_ROUTE_BLOCK_S at PLAIN_ROUTE_ALPHA -> (bool, cut,
-    the block test)."""
-    rn, ra = np.asarray(resid_null, float), np.asarray(resid_alt, float)
-    test = np.asarray(data.test_mask, bool) & np.isfinite(rn) & np.isfinite(ra)
-    if not test.any():
-        return False, 0.0, None
-    cut = 1.0 - float(np.mean(ra[test] ** 2) / np.mean(rn[test] ** 2))
-    block = plain_worse_test(ra, rn, data.test_mask, data.run_start, data.t, block_s=PLAIN_ROUTE_BLOCK_S)
-    return bool(cut >= PLAIN_ROUTE_CUT and block.p_value < PLAIN_ROUTE_ALPHA), cut, block
+def halves_in_plain_squares(data, resid_null, resid_alt) -> tuple:
+    """The alternative halves the null's plain held-out mean square, significantly over held-out
+    blocks of PLAIN_ROUTE_BLOCK_S: the bar a rival meets on the none path
+    (force_dynamics.LARGE_PLAIN_CUT at LARGE_CUT_ALPHA, structure_test.plain_cross_fit_test with
+    the null's residual less the alternative's as the prediction) -> (bool, cut, the block test)."""
+    rn = np.asarray(resid_null, float)
+    plain = plain_cross_fit_test(rn, rn - np.asarray(resid_alt, float), data.test_mask, data.run_start, data.t,
+                                 block_s=PLAIN_ROUTE_BLOCK_S)
+    return plain.significant(LARGE_CUT_ALPHA, LARGE_PLAIN_CUT), float(plain.cut_frac), plain
 
 
 def against_first(data, first, second, alpha: float, min_gain_frac: float, second_base=None) -> tuple:
@@ -116,8 +113,8 @@ def against_first(data, first, second, alpha: float, min_gain_frac: float, secon
     plain_ok = bool(halves and head.t_stat > 0)
     info = {"held_out_t": float(head.t_stat), "innovation_variance_cut": float(head.gain_frac),
             "held_out_rmse": float(head.rmse_alt), "first_held_out_rmse": float(head.rmse_null),
-            "plain_mean_square_cut": float(cut), "plain_block_t": float(block.t_stat) if block else 0.0,
-            "plain_block_p": float(block.p_value) if block else 1.0, "plain_blocks": int(block.n_blocks) if block else 0,
+            "plain_mean_square_cut": cut, "plain_block_t": float(block.t_stat),
+            "plain_block_p": float(block.p_value), "plain_blocks": int(block.n_blocks),
             "taken_in_plain_squares": bool(plain_ok and not ok)}
     return ok or plain_ok, info
 

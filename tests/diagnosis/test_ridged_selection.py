@@ -78,7 +78,8 @@ def test_halving_the_plain_held_out_squares_is_a_missing_slow_cause_not_a_drift(
     blocks; a cubic in time fitted to an OU sensor drift (60 % of an 8 N*m noise) on the
     training spans and carried into the held-out spans does not, nor does a model that only
     adds noise of its own."""
-    from clutch_model.diagnosis.ridged_selection import PLAIN_ROUTE_CUT, halves_in_plain_squares
+    from clutch_model.diagnosis.force_dynamics import LARGE_PLAIN_CUT
+    from clutch_model.diagnosis.ridged_selection import halves_in_plain_squares
     from clutch_model.diagnosis.selection import SelectionData
 
     from .synthetic_residuals import make_inputs, make_noise, ou_drift_noise, split_spans
@@ -95,7 +96,7 @@ def test_halving_the_plain_held_out_squares_is_a_missing_slow_cause_not_a_drift(
 
     drift = ou_drift_noise(run_start, 8.0, seed, drift_share=0.6)
     halves, cut, _ = halves_in_plain_squares(data, drift, drift - _cubic_on_training_spans(drift, t, run_start, train))
-    assert not halves and cut < PLAIN_ROUTE_CUT
+    assert not halves and cut < LARGE_PLAIN_CUT
 
     other = make_noise("ar1_095", run_start, 5.0, seed + 100)
     halves, cut, _ = halves_in_plain_squares(data, noise, noise - 0.3 * other)
