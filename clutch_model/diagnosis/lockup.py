@@ -142,10 +142,10 @@ def slip_quantum(w, on_grid_frac: float = 0.95) -> float:
     """The step a slip signal is logged in (rad/s), or 0 when it is not quantised: the smallest
     nonzero change between successive samples that recurs (three times or more; a continuous
     signal repeats none), kept when at least ``on_grid_frac`` of the changes are its multiples.
-    Measured on an outside generator's campaign (slip logged in 0.01 rad/s steps, noise sd 0.004 rad/s while locked):
-    the locked slip read 0 on all but a few samples, the first-difference MAD was 0, the lock
-    thresholds fell to the 0.001 rad/s tolerance, a single 0.01 reading broke every lock phase
-    and none of the 22 % locked time was found."""
+    Measured on an outside generator's campaign (slip logged in 0.01 rad/s steps, noise sd
+    0.004 rad/s while locked): the locked slip read 0 on all but a few samples, the
+    first-difference MAD was 0, the lock thresholds fell to the 0.001 rad/s tolerance, a single
+    0.01 reading broke every lock phase and none of the 22 % locked time was found."""
     w = np.asarray(w, float)
     w = w[np.isfinite(w)]
     d = np.abs(np.diff(w))
