@@ -37,6 +37,7 @@ from clutch_model.plant.simulate import SimResult
 from clutch_model.diagnosis import features as F
 from clutch_model.diagnosis.candidates import CampaignContext, MechanismCandidate, baseline_fit
 from clutch_model.diagnosis.input_hold import decide_input_noise, with_midpoint_force, with_smoothed_slip
+from clutch_model.diagnosis.input_timing import choose_input_timing, with_held_inputs
 from clutch_model.diagnosis.lockup import without_locked_torque
 from clutch_model.diagnosis.run_level import within_run_forecast
 from clutch_model.diagnosis.force_dynamics import (named_or_constant_play, named_or_force_dynamics,
@@ -323,6 +324,7 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
     # prediction: the plant is driven by the slip smoothed without phase (input_hold)
     input_noise = decide_input_noise(campaign, nominal)
     say(input_noise.describe())
+    input_info = input_noise.to_dict()
     if input_noise.smoothed:
         campaign = with_smoothed_slip(campaign, input_noise.sigma_s)
     if measured_time is None:
@@ -330,10 +332,20 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
     if measured_time:
         # compare where the measurement is: rows at the torque's own stamps, inputs
         # interpolated between their samples (diagnosis.measured_time)
-        campaign = measured_time_campaign(campaign, rate_hz=MEASURED_TIME_GRID_HZ)
+        regridded = measured_time_campaign(campaign, rate_hz=MEASURED_TIME_GRID_HZ)
         # rows at the torque's stamps are far apart (20 ms at 50 Hz) and the plant holds each
-        # row's inputs over its step: give it the force of the step's midpoint (input_hold)
-        campaign = with_midpoint_force(campaign)
+        # row's inputs over its step: give it the force of the step's midpoint (input_hold),
+        # or, when the data say the inputs hold between their samples as replay reads them,
+        # the mean of the held force over the step (input_timing)
+        campaign = with_midpoint_force(regridded)
+        held = with_held_inputs(regridded)
+        timing = choose_input_timing(campaign, held, bench_model)
+        del regridded
+        say(timing.describe())
+        input_info = {**input_info, **timing.to_dict()}
+        if timing.held:
+            campaign = held
+        del held
     # fast logs: anti-aliased decimation to the rate the diagnosis needs (diagnosis.decimation)
     plan = None
     if diagnosis_rate_hz is None or diagnosis_rate_hz > 0:
@@ -350,7 +362,7 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
     args = dict(nominal=nominal, bench_model=bench_model, held_out=held_out, candidates=candidates,
                 calibrate=calibrate, say=say, emit=emit, discover=discover, fit_executor=fit_executor,
                 sample_budget_s=sample_budget_s, plan=plan, timings=timings, tick=tick, bench_info=bench_info,
-                inputs=input_noise.to_dict())
+                inputs=input_info)
     # a named delay or torque-sensor lag carries each lock phase's driveline torque into the
     # measured torque after it, where no clutch model can follow: those rows are left out too,
     # and the campaign diagnosed again, until the tail covers what the final model names. The

@@ -1,0 +1,109 @@
+"""How the inputs are read between their samples: linear, or held as replay holds them
+(diagnosis.input_timing).
+
+References: the staircase's integral by hand; and two ways a log is made, the plant simulated
+on a 1 kHz grid driven either by a continuous force sampled at 200 Hz for the log (a sensor
+sampling a moving force) or by the 200 Hz samples held until the next one (a commanded force,
+and what replay does). The measured torque is logged at 1 kHz with AR(1) noise; the choice
+must side with the way the log was made, and the held reading of a held log must leave no
+apparent delay."""
+import numpy as np
+import pytest
+
+from clutch_model.diagnosis.input_hold import with_midpoint_force
+from clutch_model.diagnosis.input_timing import (BETA_HELD, choose_input_timing, held_at, step_mean_of_held,
+                                                 with_held_inputs)
+from clutch_model.diagnosis.measured_time import measured_time_campaign
+from clutch_model.formats.bag_reader import Campaign, Run
+from clutch_model.plant.params import load_model
+from clutch_model.plant.simulate import simulate
+
+
+def test_step_mean_of_a_staircase_is_its_integral():
+    ts = np.array([0.0, 1.0, 2.0])
+    vs = np.array([0.0, 10.0, 20.0])
+    t = np.array([0.5, 1.5, 2.5, 3.0])
+    # [0.5, 1.5]: half at 0, half at 10; [1.5, 2.5]: half 10, half 20; [2.5, 3]: 20; last: held
+    assert np.allclose(step_mean_of_held(ts, vs, t), [5.0, 15.0, 20.0, 20.0], rtol=0, atol=1e-12)
+    assert np.allclose(held_at(ts, vs, np.array([-1.0, 0.0, 0.99, 1.0, 7.0])), [0, 0, 0, 10, 20])
+
+
+def _log(held_truth: bool, seed: int, duration_s: float = 12.0):
+    """A run as read from a bag: force at 200 Hz (jittered), slip at 100 Hz, torque at 1 kHz
+    (AR(1) noise), the plant on a 1 kHz grid."""
+    rng = np.random.default_rng(seed)
+    model = load_model(None)
+    fine = np.arange(0.0, duration_s, 1e-3)
+    # controller-like: ramps and holds between 500 N and 14 kN, and a sweep
+    knots_t = np.arange(0.0, duration_s + 0.5, 0.5)
+    knots_f = rng.uniform(500.0, 14000.0, knots_t.size)
+    force_cont = np.interp(fine, knots_t, knots_f) + 1500.0 * np.sin(2 * np.pi * 3.0 * fine)
+    tf = np.sort(np.arange(0.0, duration_s, 5e-3) + rng.uniform(-5e-4, 5e-4, int(round(duration_s / 5e-3))))
+    tf[0] = 0.0
+    f_log = np.interp(tf, fine, force_cont)
+    ts = np.arange(0.0, duration_s, 1e-2)
+    slip_cont = 8.0 + 4.0 * np.sin(2 * np.pi * 0.2 * fine)
+    s_log = np.interp(ts, fine, slip_cont)
+    if held_truth:   # the plant driven by the logged samples held until the next one
+        force_in = held_at(tf, f_log, fine)
+        slip_in = held_at(ts, s_log, fine)
+    else:            # the plant driven by the continuous signals the logs sample
+        force_in, slip_in = force_cont, slip_cont
+    sump = np.full(fine.size, 60.0)
+    torque = simulate(model, fine, force_in, slip_in, sump).torque_nm
+    noise = np.zeros(fine.size)
+    e = rng.normal(0.0, 1.0, fine.size)
+    for k in range(1, fine.size):
+        noise[k] = 0.9 * noise[k - 1] + e[k]
+    tq_t = fine[5:]
+    tq = torque[5:] + 2.0 * noise[5:]
+    samples = {"applied_force": (tf, f_log), "slip_speed": (ts, s_log),
+               "sump_temperature": (np.array([0.0, duration_s]), np.array([60.0, 60.0])),
+               "measured_torque": (tq_t, tq)}
+    grid_t = tf
+    run = Run(name=f"run{seed}", t=grid_t, applied_force_n=f_log, slip_speed_rad_s=held_at(ts, s_log, grid_t),
+              sump_temperature_c=np.full(grid_t.size, 60.0), torque_measured_nm=held_at(tq_t, tq, grid_t),
+              start_time_ns=seed * 10**12, samples=samples)
+    return model, Campaign([run])
+
+
+@pytest.mark.parametrize("held_truth", [True, False])
+def test_the_data_choose_how_the_inputs_are_read(held_truth):
+    model, campaign = _log(held_truth, seed=4 if held_truth else 5)
+    regridded = measured_time_campaign(campaign, rate_hz=1.0)
+    linear, held = with_midpoint_force(regridded), with_held_inputs(regridded)
+    choice = choose_input_timing(linear, held, model)
+    assert choice.rows > 5000 and choice.difference_rms_nm > 1.0
+    assert choice.held is held_truth, choice
+    # and the weight is near its reading's value, far from the bar
+    assert abs(choice.beta - (1.0 if held_truth else 0.0)) < 0.3, choice
+    assert abs(choice.beta - BETA_HELD) > 0.2
+
+
+def test_a_held_log_read_held_has_no_apparent_delay():
+    """On the held log, the model's best-aligned shift against the noise-free measurement is
+    about half a force period with the linear reading and about zero with the held one."""
+    from clutch_model.replay import replay_runs
+
+    model, campaign = _log(True, seed=6)
+    regridded = measured_time_campaign(campaign, rate_hz=1.0)
+    run = campaign.runs[0]
+    fine = np.arange(0.0, 12.0, 1e-3)
+    tf, f_log = run.samples["applied_force"]
+    ts, s_log = run.samples["slip_speed"]
+    truth = simulate(model, fine, held_at(tf, f_log, fine), held_at(ts, s_log, fine),
+                     np.full(fine.size, 60.0)).torque_nm
+
+    def best_shift_ms(campaign_read):
+        pred = np.asarray(replay_runs(model, campaign_read).torque_sim, float)
+        t = campaign_read.t
+        ok = np.isfinite(campaign_read.torque_measured) & (t > 1.0) & (t < 11.0)
+        shifts = np.arange(-6.0, 6.01, 0.25)
+        # the model at t against the truth at t + s: s > 0 when the model leads
+        err = [np.mean((np.interp(t[ok] + s * 1e-3, fine, truth) - pred[ok]) ** 2) for s in shifts]
+        return float(shifts[int(np.argmin(err))])
+
+    lin = best_shift_ms(with_midpoint_force(regridded))
+    hel = best_shift_ms(with_held_inputs(regridded))
+    assert 1.5 <= lin <= 3.5, lin       # the linear reading leads: the data look 2.5 ms late
+    assert abs(hel) <= 0.5, hel
