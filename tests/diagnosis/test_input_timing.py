@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from clutch_model.diagnosis.input_hold import with_midpoint_force
-from clutch_model.diagnosis.input_timing import (BETA_HELD, choose_input_timing, held_at, step_mean_of_held,
-                                                 with_held_inputs)
+from clutch_model.diagnosis.input_timing import (BETA_HELD, BETA_HELD_MAX, choose_input_timing, held_at,
+                                                 step_mean_of_held, with_held_inputs)
 from clutch_model.diagnosis.measured_time import measured_time_campaign
 from clutch_model.formats.bag_reader import Campaign, Run
 from clutch_model.plant.params import load_model
@@ -28,7 +28,7 @@ def test_step_mean_of_a_staircase_is_its_integral():
     assert np.allclose(held_at(ts, vs, np.array([-1.0, 0.0, 0.99, 1.0, 7.0])), [0, 0, 0, 10, 20])
 
 
-def _log(held_truth: bool, seed: int, duration_s: float = 12.0):
+def _log(held_truth: bool, seed: int, duration_s: float = 12.0, delay_s: float = 0.0):
     """A run as read from a bag: force at 200 Hz (jittered), slip at 100 Hz, torque at 1 kHz
     (AR(1) noise), the plant on a 1 kHz grid."""
     rng = np.random.default_rng(seed)
@@ -56,7 +56,7 @@ def _log(held_truth: bool, seed: int, duration_s: float = 12.0):
     for k in range(1, fine.size):
         noise[k] = 0.9 * noise[k - 1] + e[k]
     tq_t = fine[5:]
-    tq = torque[5:] + 2.0 * noise[5:]
+    tq = np.interp(tq_t - delay_s, fine, torque) + 2.0 * noise[5:]
     samples = {"applied_force": (tf, f_log), "slip_speed": (ts, s_log),
                "sump_temperature": (np.array([0.0, duration_s]), np.array([60.0, 60.0])),
                "measured_torque": (tq_t, tq)}
@@ -107,3 +107,14 @@ def test_a_held_log_read_held_has_no_apparent_delay():
     hel = best_shift_ms(with_held_inputs(regridded))
     assert 1.5 <= lin <= 3.5, lin       # the linear reading leads: the data look 2.5 ms late
     assert abs(hel) <= 0.5, hel
+
+
+def test_a_delay_in_the_data_keeps_the_linear_reading():
+    """A 30 ms transport delay on a held log: the measurement is far later than both readings
+    (they are confounded with a delay), the weight far above BETA_HELD_MAX, and the linear
+    reading is kept (the delay is then fitted half a force period long)."""
+    model, campaign = _log(True, seed=7, delay_s=0.03)
+    regridded = measured_time_campaign(campaign, rate_hz=1.0)
+    choice = choose_input_timing(with_midpoint_force(regridded), with_held_inputs(regridded), model)
+    assert choice.beta > 2 * BETA_HELD_MAX, choice
+    assert not choice.held
