@@ -332,20 +332,17 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
     if measured_time:
         # compare where the measurement is: rows at the torque's own stamps, inputs
         # interpolated between their samples (diagnosis.measured_time)
-        regridded = measured_time_campaign(campaign, rate_hz=MEASURED_TIME_GRID_HZ)
+        campaign = measured_time_campaign(campaign, rate_hz=MEASURED_TIME_GRID_HZ)
         # rows at the torque's stamps are far apart (20 ms at 50 Hz) and the plant holds each
         # row's inputs over its step: give it the force of the step's midpoint (input_hold),
         # or, when the data say the inputs hold between their samples as replay reads them,
         # the mean of the held force over the step (input_timing)
-        campaign = with_midpoint_force(regridded)
-        held = with_held_inputs(regridded)
-        timing = choose_input_timing(campaign, held, bench_model)
-        del regridded
+        campaign = with_midpoint_force(campaign)
+        timing = choose_input_timing(campaign, bench_model)
         say(timing.describe())
         input_info = {**input_info, **timing.to_dict()}
         if timing.held:
-            campaign = held
-        del held
+            campaign = with_held_inputs(campaign)
     # fast logs: anti-aliased decimation to the rate the diagnosis needs (diagnosis.decimation)
     plan = None
     if diagnosis_rate_hz is None or diagnosis_rate_hz > 0:

@@ -85,21 +85,17 @@ def step_mean_of_held(sample_t: np.ndarray, sample_v: np.ndarray, t: np.ndarray)
 
 
 def with_held_inputs(campaign):
-    """The measured-time campaign (``measured_time_campaign``, before any midpoint force)
-    read as replay reads its inputs: each row's force the mean over its step of the force
+    """The measured-time campaign (``measured_time_campaign``, with or without the midpoint
+    force: the force and slip are read again from each run's own samples) read as replay
+    reads its inputs: each row's force the mean over its step of the force
     samples held until the next one, the slip the latest sample at or before the row (the
     sump temperature, slow, as it is). Runs without their own samples are kept."""
     from clutch_model.formats.bag_reader import Campaign
 
     runs = []
     for run in campaign.runs:
-        force = run.samples.get("applied_force")
-        slip = run.samples.get("slip_speed")
-        if force is None or slip is None or run.t.size < 2:
-            runs.append(run)
-            continue
-        runs.append(replace(run, applied_force_n=step_mean_of_held(*force, run.t),
-                            slip_speed_rad_s=held_at(*slip, run.t)))
+        held = _held_run_inputs(run, np.asarray(run.t, float))
+        runs.append(run if held is None else replace(run, applied_force_n=held[0], slip_speed_rad_s=held[1]))
     return Campaign(runs)
 
 
@@ -123,33 +119,50 @@ class InputTiming:
                 "rows": self.rows, "difference_rms_nm": self.difference_rms_nm}
 
 
-def _head_rows(campaign, max_rows: int) -> np.ndarray:
-    """Rows of each run from its start, up to max_rows in all (shared by the runs)."""
-    keep = np.zeros(campaign.t.size, bool)
-    per_run = max(max_rows // max(len(campaign.runs), 1), 1)
-    for _, sl in campaign.slices():
-        keep[sl.start:min(sl.stop, sl.start + per_run)] = True
-    return keep
+def _held_run_inputs(run, t: np.ndarray) -> tuple:
+    """(force, slip) of a run read held at rows ``t`` (with_held_inputs' reading), or None
+    when the run has not its own samples."""
+    force = run.samples.get("applied_force")
+    slip = run.samples.get("slip_speed")
+    if force is None or slip is None or t.size < 2:
+        return None
+    return step_mean_of_held(*force, t), held_at(*slip, t)
 
 
-def choose_input_timing(linear, held, model, max_rows: int = MAX_ROWS) -> InputTiming:
+def choose_input_timing(linear, model, max_rows: int = MAX_ROWS) -> InputTiming:
     """Which reading of the inputs the measured torque sides with (module docstring): the
-    model simulated on both campaigns (same rows), the torque regressed on the difference."""
+    model simulated on the linear campaign (``with_midpoint_force`` of the measured-time
+    campaign, its runs' own samples kept) and on the same rows read held, up to ``max_rows``
+    rows from the runs' starts; the torque regressed on the difference of the two
+    predictions. Only the chosen campaign is ever built whole (``with_held_inputs``)."""
     from clutch_model.prediction import PlantInputs, predict_campaign
 
-    keep = _head_rows(linear, max_rows)
+    per_run = max(max_rows // max(len(linear.runs), 1), 2)
+    parts = {"t": [], "rs": [], "fl": [], "sl": [], "fh": [], "sh": [], "sump": [], "y": []}
+    for run in linear.runs:
+        t = np.asarray(run.t, float)[:per_run]
+        held = _held_run_inputs(run, t)
+        if held is None or run.torque_measured_nm is None:
+            continue
+        rs = np.zeros(t.size, bool)
+        rs[0] = True
+        for key, v in (("t", t), ("rs", rs), ("fl", run.applied_force_n[:per_run]), ("sl", run.slip_speed_rad_s[:per_run]),
+                       ("fh", held[0]), ("sh", held[1]), ("sump", run.sump_temperature_c[:per_run]),
+                       ("y", run.torque_measured_nm[:per_run])):
+            parts[key].append(np.asarray(v))
+    if not parts["t"]:
+        return InputTiming(held=False, beta=float("nan"), rows=0, difference_rms_nm=0.0)
+    cat = {k: np.concatenate(v) for k, v in parts.items()}
 
-    def predicted(campaign):
-        rs = np.asarray(campaign.run_start, bool)[keep]
-        inputs = PlantInputs(t=np.asarray(campaign.t, float)[keep], force=np.asarray(campaign.force, float)[keep],
-                             slip=np.asarray(campaign.slip, float)[keep], sump=np.asarray(campaign.sump, float)[keep],
-                             run_start=rs)
+    def predicted(force, slip):
+        inputs = PlantInputs(t=cat["t"], force=np.asarray(force, float), slip=np.asarray(slip, float),
+                             sump=np.asarray(cat["sump"], float), run_start=cat["rs"])
         return np.asarray(predict_campaign(model, inputs, energy0_j=0.0).torque_nm, float)
 
-    p_lin, p_held = predicted(linear), predicted(held)
-    y = np.asarray(linear.torque_measured, float)[keep]
-    slip = np.asarray(linear.slip, float)[keep]
-    ok = np.isfinite(y) & np.isfinite(p_lin) & np.isfinite(p_held) & (np.abs(slip) > MIN_SLIP_RAD_S)
+    p_lin, p_held = predicted(cat["fl"], cat["sl"]), predicted(cat["fh"], cat["sh"])
+    y = np.asarray(cat["y"], float)
+    ok = (np.isfinite(y) & np.isfinite(p_lin) & np.isfinite(p_held)
+          & (np.abs(np.asarray(cat["sl"], float)) > MIN_SLIP_RAD_S))
     d = (p_held - p_lin)[ok]
     n = int(ok.sum())
     rms = float(np.sqrt(np.mean(d * d))) if n else 0.0

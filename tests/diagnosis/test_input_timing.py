@@ -71,8 +71,8 @@ def _log(held_truth: bool, seed: int, duration_s: float = 12.0, delay_s: float =
 def test_the_data_choose_how_the_inputs_are_read(held_truth):
     model, campaign = _log(held_truth, seed=4 if held_truth else 5)
     regridded = measured_time_campaign(campaign, rate_hz=1.0)
-    linear, held = with_midpoint_force(regridded), with_held_inputs(regridded)
-    choice = choose_input_timing(linear, held, model)
+    linear = with_midpoint_force(regridded)
+    choice = choose_input_timing(linear, model)
     assert choice.rows > 5000 and choice.difference_rms_nm > 1.0
     assert choice.held is held_truth, choice
     # and the weight is near its reading's value, far from the bar
@@ -115,6 +115,6 @@ def test_a_delay_in_the_data_keeps_the_linear_reading():
     reading is kept (the delay is then fitted half a force period long)."""
     model, campaign = _log(True, seed=7, delay_s=0.03)
     regridded = measured_time_campaign(campaign, rate_hz=1.0)
-    choice = choose_input_timing(with_midpoint_force(regridded), with_held_inputs(regridded), model)
+    choice = choose_input_timing(with_midpoint_force(regridded), model)
     assert choice.beta > 2 * BETA_HELD_MAX, choice
     assert not choice.held
