@@ -372,7 +372,7 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
             d = _diagnose_masked(wider, mask, **args, first_step=screen)
         except WiderLockTail as stopped:
             screens += 1
-            need, which = stopped.tail_s, stopped.which
+            need, which, need_x = stopped.tail_s, stopped.which, stopped.crossing_s
         else:
             if tail > 0.0:
                 d.calibration_info = {**d.calibration_info, "lock_tail_s": tail}
@@ -381,8 +381,10 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
                 return d
             rounds += 1
             which = ", ".join(c["id"] for c in d.causes) or "closest " + " / ".join(d.selection.closest)
+            need_x = _lock_tail_of(d, delay_only=True)
         tail = need + LOCK_TAIL_SLACK_S
-        wider, more = with_lock_tail(campaign, lock_results, tail)
+        wider, more = with_lock_tail(campaign, lock_results, tail,
+                                     crossing_tail_s=need_x + LOCK_TAIL_SLACK_S if need_x > 0.0 else 0.0)
         mask = locked | more
         say(f"lock phases: {which} carries the driveline torque {tail:.3f} s past each lock phase: "
             f"leaving those rows out too and diagnosing again")
@@ -393,9 +395,9 @@ class WiderLockTail(Exception):
     better than the noise model asks for a wider lock tail (``_lock_tail_screen``): the rest of
     that diagnosis would be done again on other rows, so it stops there."""
 
-    def __init__(self, tail_s: float, which: str):
+    def __init__(self, tail_s: float, which: str, crossing_s: float = 0.0):
         super().__init__(f"lock tail {tail_s:.3f} s ({which})")
-        self.tail_s, self.which = float(tail_s), which
+        self.tail_s, self.which, self.crossing_s = float(tail_s), which, float(crossing_s)
 
 
 def _lock_tail_screen(tail_s: float):
@@ -406,17 +408,20 @@ def _lock_tail_screen(tail_s: float):
     Measured on actuator_lag@car#8 (magnitude seed 20261129): the first diagnosis, done in full
     only to learn that tail, was 72 of the cell's 107 s."""
     def check(step) -> None:
-        need = {sc.id: _candidate_tail_s(sc.id, sc.fitted) for sc in step.scores if sc.significant}
+        significant = {sc.id: sc.fitted for sc in step.scores if sc.significant}
+        need = {cid: _candidate_tail_s(cid, fitted) for cid, fitted in significant.items()}
         which = max(need, key=need.get, default=None)
         if which is not None and need[which] > tail_s + LOCK_TAIL_SLACK_S:
-            raise WiderLockTail(LOCK_TAIL_SCREEN_MARGIN * need[which], which)
+            crossing = max((_candidate_tail_s(cid, f, delay_only=True) for cid, f in significant.items()), default=0.0)
+            raise WiderLockTail(LOCK_TAIL_SCREEN_MARGIN * need[which], which, LOCK_TAIL_SCREEN_MARGIN * crossing)
     return check
 
 
-def lock_tail_needed_s(causes) -> float:
+def lock_tail_needed_s(causes, delay_only: bool = False) -> float:
     """How long after a lock phase the measured torque still carries its driveline torque under
     the named causes: a transport delay (its upper 95 % bound) plus three torque-sensor time
-    constants (the upper bound of the time constant)."""
+    constants (the upper bound of the time constant). ``delay_only``: the delay's part alone,
+    the tail after a zero crossing of the slip (``with_lock_tail``)."""
     need = 0.0
     for c in causes:
         hi = {k: float(v[1]) for k, v in (c.get("parameters_ci95") or {}).items()
@@ -424,7 +429,7 @@ def lock_tail_needed_s(causes) -> float:
         vals = c.get("parameters") or {}
         if c["id"] == "transport_delay":
             need += max(hi.get("delay_s", 0.0), float(vals.get("delay_s", 0.0)))
-        elif c["id"] == "torque_sensor_lag":
+        elif c["id"] == "torque_sensor_lag" and not delay_only:
             need += 3.0 * max(hi.get("tau_s", 0.0), float(vals.get("tau_s", 0.0)))
     return float(need)
 
@@ -453,7 +458,7 @@ def with_timing_resolution(causes: list, half_row_s: float) -> list:
     return causes
 
 
-def _lock_tail_of(d: "Diagnosis") -> float:
+def _lock_tail_of(d: "Diagnosis", delay_only: bool = False) -> float:
     """The lock tail a diagnosis asks for: the longest of its named causes'
     (``lock_tail_needed_s``), the closest candidates' when it is ``unexplained``, and every
     first-step candidate's that predicts the held-out data better than the noise model (its
@@ -461,29 +466,36 @@ def _lock_tail_of(d: "Diagnosis") -> float:
     candidate says no clutch model can follow are left out for all: with the tail a torque-sensor
     lag leaves after each lock phase still compared, a 0.1 s sensor lag lost to actuator_lag
     (held-out t 6.6 against 31.7) and was named once the tail was left out."""
-    need = [lock_tail_needed_s(d.causes)] if d.causes else []
+    need = [lock_tail_needed_s(d.causes, delay_only)] if d.causes else []
     if d.selection is None:
         return max(need, default=0.0)
     fitted = {sc.id: sc.fitted for sc in d.scores}
     alike = [cid for cid in d.selection.closest if cid in fitted] if d.cause_id == "unexplained" else []
     alike += [sc.id for sc in d.scores if sc.significant]
-    need += [_candidate_tail_s(cid, fitted[cid]) for cid in alike]
+    need += [_candidate_tail_s(cid, fitted[cid], delay_only) for cid in alike]
     return max(need, default=0.0)
 
 
-def _candidate_tail_s(cid: str, fitted) -> float:
+def _candidate_tail_s(cid: str, fitted, delay_only: bool = False) -> float:
     """The lock tail one candidate asks for at its fitted parameters (no interval)."""
-    return lock_tail_needed_s([{"id": cid, "parameters": fitted.parameters}])
+    return lock_tail_needed_s([{"id": cid, "parameters": fitted.parameters}], delay_only)
 
 
-def with_lock_tail(campaign: Campaign, lock_results: list, tail_s: float) -> tuple:
+def with_lock_tail(campaign: Campaign, lock_results: list, tail_s: float,
+                   crossing_tail_s: float | None = None) -> tuple:
     """(campaign with the measured torque NaN also ``tail_s`` past each lock phase's padded end
-    and past each zero crossing's window, the rows newly left out). A delayed or low-passed
-    reading flips after the slip does, and the flip's instant is as uncertain there as at the
-    slip's crossing: on an outside generator's delay (26.6 ms) with a friction degradation and
-    slip sign flips, the rows just after each crossing window were off by hundreds of N*m for a
-    0.8 ms error in the fitted delay, and a drag of 0.040 N*m/(rad/s) was named as a third
-    cause on them."""
+    and ``crossing_tail_s`` (default ``tail_s``) past each zero crossing's window, the rows newly
+    left out). A delayed reading flips after the slip does, and the flip's instant is as
+    uncertain there as at the slip's crossing: on an outside generator's delay (26.6 ms) with a
+    friction degradation and slip sign flips, the rows just after each crossing window were off
+    by hundreds of N*m for a 0.8 ms error in the fitted delay, and a drag of 0.040 N*m/(rad/s)
+    was named as a third cause on them. The diagnosis asks for the delay's part alone there
+    (``lock_tail_needed_s(delay_only=True)``): a low-passed reading smears the flip over its time
+    constant without a jump, and that smear is what tells a sensor lag from an actuator lag. Left
+    out for a 38 ms sensor lag too, it cost an outside generator's preload with a sensor lag
+    under sign flips its name (`unexplained`: actuator_lag and torque_sensor_lag could not be
+    told apart)."""
+    crossing_tail_s = tail_s if crossing_tail_s is None else crossing_tail_s
     runs, more = [], []
     for run, res in zip(campaign.runs, lock_results):
         extra = np.zeros(run.t.size, bool)
@@ -491,7 +503,8 @@ def with_lock_tail(campaign: Campaign, lock_results: list, tail_s: float) -> tup
             extra |= (run.t > b) & (run.t <= b + LOCK_PAD_S + tail_s)
         for a, b in res.crossings:
             # the measured torque flips that much after the slip: its uncertain instant with it
-            extra |= (run.t > b) & (run.t <= b + tail_s)
+            if crossing_tail_s > 0.0:
+                extra |= (run.t > b) & (run.t <= b + crossing_tail_s)
         if run.torque_measured_nm is not None:
             extra &= np.isfinite(run.torque_measured_nm)
             if extra.any():

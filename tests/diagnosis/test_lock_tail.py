@@ -66,6 +66,23 @@ def test_with_lock_tail_also_follows_each_zero_crossing_of_the_slip():
     assert newly.sum() == 10
     assert np.array_equal(np.isnan(wider.runs[0].torque_measured_nm), np.isnan(torque) | newly)
     assert np.array_equal(more, newly)
+    # the crossing's own tail when given (a delay's part only): none leaves the crossing's rows
+    _, none_more = with_lock_tail(camp, locks, 0.1, crossing_tail_s=0.0)
+    assert not none_more.any()
+    _, short = with_lock_tail(camp, locks, 0.1, crossing_tail_s=0.03)
+    assert np.array_equal(short, (t > window[1]) & (t <= window[1] + 0.03))
+
+
+def test_a_crossing_asks_for_the_delay_alone():
+    """After a lock phase a delay and three sensor time constants; after a zero crossing the
+    delay alone (a sensor lag's smear of the flip is its evidence, not a jump to leave out)."""
+    from clutch_model.diagnosis.engine import lock_tail_needed_s
+
+    causes = [{"id": "transport_delay", "parameters": {"delay_s": 0.02}, "parameters_ci95": {"delay_s": [0.018, 0.022]}},
+              {"id": "torque_sensor_lag", "parameters": {"tau_s": 0.04}, "parameters_ci95": {"tau_s": [0.035, 0.05]}}]
+    assert lock_tail_needed_s(causes) == pytest.approx(0.022 + 3 * 0.05)
+    assert lock_tail_needed_s(causes, delay_only=True) == pytest.approx(0.022)
+    assert lock_tail_needed_s(causes[1:], delay_only=True) == 0.0
 
 
 def test_truth_scoring_leaves_out_the_sensor_tail():
