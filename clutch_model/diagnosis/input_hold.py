@@ -162,6 +162,17 @@ def _samples(run, channel, grid_values):
     return (s[0], s[1]) if s is not None else (run.t, grid_values)
 
 
+GRID_FIELDS = ("t", "applied_force_n", "slip_speed_rad_s", "sump_temperature_c", "torque_measured_nm",
+               "pack_temperature_measured_c")
+
+
+def run_rows(run, keep):
+    """The run (bag_reader.Run) on the grid rows ``keep`` (a mask or a slice) of every per-row
+    field; its own samples kept."""
+    return replace(run, **{f: (getattr(run, f)[keep] if getattr(run, f) is not None else None)
+                           for f in GRID_FIELDS})
+
+
 def model_input_noise(campaign, model, window_s: float = SENSITIVITY_WINDOW_S) -> tuple:
     """(rms of d(predicted torque)/d(slip) in N*m per rad/s on slipping rows, the predicted
     torque's noise near Nyquist at the measured torque's stamps in N*m) of ``model`` on the
@@ -174,10 +185,7 @@ def model_input_noise(campaign, model, window_s: float = SENSITIVITY_WINDOW_S) -
     keep = run.t <= run.t[0] + window_s
     if keep.sum() < 10:
         return float("nan"), float("nan")
-    cut = {f: (getattr(run, f)[keep] if getattr(run, f) is not None else None)
-           for f in ("t", "applied_force_n", "slip_speed_rad_s", "sump_temperature_c", "torque_measured_nm",
-                     "pack_temperature_measured_c")}
-    base = replace(run, samples={}, **cut)
+    base = replace(run_rows(run, keep), samples={})
     step = np.sign(base.slip_speed_rad_s) * SLIP_STEP_RAD_S
     moved = replace(base, slip_speed_rad_s=base.slip_speed_rad_s + np.where(step == 0, SLIP_STEP_RAD_S, step))
     pred = predict_campaign(model, Campaign([base]), energy0_j=0.0).torque_nm

@@ -135,34 +135,21 @@ def choose_input_timing(linear, model, max_rows: int = MAX_ROWS) -> InputTiming:
     campaign, its runs' own samples kept) and on the same rows read held, up to ``max_rows``
     rows from the runs' starts; the torque regressed on the difference of the two
     predictions. Only the chosen campaign is ever built whole (``with_held_inputs``)."""
-    from clutch_model.prediction import PlantInputs, predict_campaign
+    from clutch_model.diagnosis.input_hold import run_rows
+    from clutch_model.formats.bag_reader import Campaign
+    from clutch_model.prediction import predict_campaign
 
     per_run = max(max_rows // max(len(linear.runs), 1), 2)
-    parts = {"t": [], "rs": [], "fl": [], "sl": [], "fh": [], "sh": [], "sump": [], "y": []}
-    for run in linear.runs:
-        t = np.asarray(run.t, float)[:per_run]
-        held = _held_run_inputs(run, t)
-        if held is None or run.torque_measured_nm is None:
-            continue
-        rs = np.zeros(t.size, bool)
-        rs[0] = True
-        for key, v in (("t", t), ("rs", rs), ("fl", run.applied_force_n[:per_run]), ("sl", run.slip_speed_rad_s[:per_run]),
-                       ("fh", held[0]), ("sh", held[1]), ("sump", run.sump_temperature_c[:per_run]),
-                       ("y", run.torque_measured_nm[:per_run])):
-            parts[key].append(np.asarray(v))
-    if not parts["t"]:
+    runs = [run_rows(r, slice(0, per_run)) for r in linear.runs if r.torque_measured_nm is not None]
+    runs = [r for r in runs if _held_run_inputs(r, r.t) is not None]
+    if not runs:
         return InputTiming(held=False, beta=float("nan"), rows=0, difference_rms_nm=0.0)
-    cat = {k: np.concatenate(v) for k, v in parts.items()}
-
-    def predicted(force, slip):
-        inputs = PlantInputs(t=cat["t"], force=np.asarray(force, float), slip=np.asarray(slip, float),
-                             sump=np.asarray(cat["sump"], float), run_start=cat["rs"])
-        return np.asarray(predict_campaign(model, inputs, energy0_j=0.0).torque_nm, float)
-
-    p_lin, p_held = predicted(cat["fl"], cat["sl"]), predicted(cat["fh"], cat["sh"])
-    y = np.asarray(cat["y"], float)
+    head = Campaign(runs)
+    p_lin, p_held = (np.asarray(predict_campaign(model, c, energy0_j=0.0).torque_nm, float)
+                     for c in (head, with_held_inputs(head)))
+    y = np.asarray(head.torque_measured, float)
     ok = (np.isfinite(y) & np.isfinite(p_lin) & np.isfinite(p_held)
-          & (np.abs(np.asarray(cat["sl"], float)) > MIN_SLIP_RAD_S))
+          & (np.abs(np.asarray(head.slip, float)) > MIN_SLIP_RAD_S))
     d = (p_held - p_lin)[ok]
     n = int(ok.sum())
     rms = float(np.sqrt(np.mean(d * d))) if n else 0.0
