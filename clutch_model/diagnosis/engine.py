@@ -46,6 +46,7 @@ from clutch_model.diagnosis.force_dynamics import (named_or_constant_play, named
                                                    none_or_force_sensor_lag, none_or_sensor_play,
                                                    none_or_force_offset, none_or_rate_limit, named_or_rate_limit)
 from clutch_model.diagnosis.lag_rivals import named_or_varying_lag
+from clutch_model.diagnosis.static_friction import fit_static_friction, lock_entry_rows, with_entry_torque
 from clutch_model.diagnosis.slip_acceleration import named_or_slip_acceleration, none_or_slip_acceleration
 from clutch_model.diagnosis.torque_line import none_or_torque_line
 from clutch_model.diagnosis.bench_anchor import named_and_bench_anchored, none_or_bench_anchored
@@ -352,7 +353,9 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
     timings["prepare (regrid, decimate)"] = time.perf_counter() - tick
     campaign = smooth_sump(campaign)
     # lock-up phases (found from the data, diagnosis.lockup): the driveline sets the torque
+    torque_by_run = [r.torque_measured_nm for r in campaign.runs]
     campaign, locked, lock_results = without_locked_rows(campaign)
+    entry_rows = lock_entry_rows(campaign, lock_results)      # while the runs keep their slip samples
     # each topic's raw samples served the regridding and the lock-up detection; nothing after
     # reads them (an hour at 1 kHz: ~0.5 GB)
     campaign = Campaign([replace(r, samples={}) for r in campaign.runs])
@@ -378,7 +381,7 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
                 d.calibration_info = {**d.calibration_info, "lock_tail_s": tail}
             need = _lock_tail_of(d)
             if not locked.any() or need <= tail + LOCK_TAIL_SLACK_S or rounds >= LOCK_TAIL_ROUNDS:
-                return d
+                return with_static_friction(d, campaign, torque_by_run, entry_rows, say, emit)
             rounds += 1
             which = ", ".join(c["id"] for c in d.causes) or "closest " + " / ".join(d.selection.closest)
             need_x = _lock_tail_of(d, delay_only=True)
@@ -388,6 +391,32 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
         mask = locked | more
         say(f"lock phases: {which} carries the driveline torque {tail:.3f} s past each lock phase: "
             f"leaving those rows out too and diagnosing again")
+
+
+def with_static_friction(d: "Diagnosis", campaign: Campaign, torque_by_run: list, entry_rows: tuple,
+                         say, emit) -> "Diagnosis":
+    """The diagnosis with the static friction (mu_S, omega_S) of its written models fitted on the
+    rows before each lock phase (static_friction.py, ``entry_rows`` = lock_entry_rows); its
+    verdict, residuals and held-out figures leave those rows out and stay as they are. The
+    outputs are written again when a model changed."""
+    rows, entries = entry_rows
+    if entries == 0:
+        return d
+    entry = with_entry_torque(campaign, torque_by_run, rows)
+    fits, models = {}, {}
+    for which, model in (("calibrated", d.calibrated_model), ("extended", d.extended_model)):
+        if which == "extended" and model is d.calibrated_model:
+            models[which], fits[which] = models["calibrated"], fits["calibrated"]
+            continue
+        models[which], fit = fit_static_friction(model, entry, rows, entries)
+        fits[which] = fit
+        say(fit.describe(which))
+    d.calibrated_model, d.extended_model = models["calibrated"], models["extended"]
+    d.calibration_info = {**d.calibration_info,
+                          "static_friction": {k: f.to_json() for k, f in fits.items()}}
+    if any(f.kept for f in fits.values()):
+        emit("selected", diagnosis=d)
+    return d
 
 
 class WiderLockTail(Exception):
