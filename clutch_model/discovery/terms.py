@@ -35,6 +35,7 @@ SIGNAL_INFO = {
     "force_rate": ("kN/s", "pack-force rate"),
     "sin_slip_angle": ("", "sine of the slip angle"),
     "cos_slip_angle": ("", "cosine of the slip angle"),
+    "slip_rate": ("rad/s²", "slip acceleration"),
 }
 RIPPLE_PAIR = ("sin_slip_angle", "cos_slip_angle")
 
@@ -63,6 +64,10 @@ class TermSignals:
         df = np.diff(fpack, prepend=fpack[:1])
         df[rs] = 0.0
         rate = np.where(dt > 0, df / np.where(dt > 0, dt, 1.0), 0.0) * 1e-3
+        # slip rate over the last step (kernel: the slip held over the last advance)
+        dw = np.diff(w, prepend=w[:1])
+        dw[rs] = 0.0
+        slip_rate = np.where(dt > 0, dw / np.where(dt > 0, dt, 1.0), 0.0)
         # slip angle: left Riemann sum of the held slip, restarted at each run (kernel order)
         incr = np.concatenate([[0.0], w[:-1] * np.diff(t)])
         incr[rs] = 0.0
@@ -81,6 +86,7 @@ class TermSignals:
             "force_rate": rate,
             "sin_slip_angle": np.sin(angle),
             "cos_slip_angle": np.cos(angle),
+            "slip_rate": slip_rate,
         }
         return cls(t=t, run_start=rs, values=values,
                    asperity_torque_nm=np.asarray(sim.asperity_torque_nm, float),
@@ -188,7 +194,8 @@ def default_library() -> list:
         if (a, b) in _IN_POLYNOMIALS or a == b and a != "slip_abs":
             continue
         terms.append(Term("mu", a, b))
-    terms += [Term("torque", "slip_sign"), Term("torque", "slip"), Term("torque", "slip", "slip_abs")]
+    terms += [Term("torque", "slip_sign"), Term("torque", "slip"), Term("torque", "slip", "slip_abs"),
+              Term("torque", "slip_rate")]
     return terms
 
 

@@ -17,6 +17,7 @@ State vector (float64[N_STATE]):
   the same film thickness and pack temperature several times (film step, end-of-step power,
   the row's outputs); a value is reused only when its keys are equal, so it is the value the
   call would return, bit for bit, whatever state or parameters come next.
+  last: the slip input held over the last advance [rad/s] (S_WPREV)
 
 Force chain (the pack_force path, mechanisms in catalog order): measured force (negative -> 0)
 -> actuator_lag (first order) -> actuator_hysteresis (play operator) -> spring_preload
@@ -48,12 +49,15 @@ S_MEMO0 = S_TERM0 + P.MAX_DISCOVERED_TERMS
 (M_VISC_OK, M_VISC_THETA, M_VISC_A0, M_VISC_A1, M_VISC,
  M_PA_OK, M_PA_H, M_PA_SIGMA, M_PA_KP, M_PA,
  M_HY_OK, M_HY_HH, M_HY) = range(S_MEMO0, S_MEMO0 + 13)
-N_STATE = S_MEMO0 + 13
+# the slip input held over the last advance (the slip rate of discovered terms), after the memo
+S_WPREV = S_MEMO0 + 13
+N_STATE = S_MEMO0 + 14
 
 # signals the discovered terms are built from (defined in layout, numba-free)
 from clutch_model.plant.layout import (SIG_NONE, SIG_PRESSURE, SIG_PACK_TEMP, SIG_SLIP_ABS,  # noqa: E402
                                        SIG_SLIP_POWER, SIG_ENERGY, SIG_FORCE_RATE, SIG_SIN_ANGLE,
-                                       SIG_COS_ANGLE, SIG_SLIP, SIG_SLIP_SIGN, TERM_FRICTION, TERM_TORQUE)
+                                       SIG_COS_ANGLE, SIG_SLIP, SIG_SLIP_SIGN, SIG_SLIP_RATE, TERM_FRICTION,
+                                       TERM_TORQUE)
 THETA_REF_C = 60.0
 DISC_FACTOR_MIN = 0.05
 
@@ -179,7 +183,8 @@ def term_signal(code, state, w, pressure_mpa, theta):
     """Value of one discovered-term signal (SIG_*) at the current state and inputs:
     contact pressure [MPa], pack temperature above 60 C [C], |slip| [rad/s], slip power of
     the previous row's output [kW], dissipated energy [MJ], pack-force rate over the last step [kN/s],
-    sin/cos of the slip angle, signed slip [rad/s], sign of slip."""
+    sin/cos of the slip angle, signed slip [rad/s], sign of slip, slip rate over the last step
+    [rad/s^2]."""
     if code == SIG_PRESSURE:
         return pressure_mpa
     if code == SIG_PACK_TEMP:
@@ -201,6 +206,9 @@ def term_signal(code, state, w, pressure_mpa, theta):
         return w
     if code == SIG_SLIP_SIGN:
         return 1.0 if w > 0.0 else (-1.0 if w < 0.0 else 0.0)
+    if code == SIG_SLIP_RATE:
+        dt = state[S_DT]
+        return (w - state[S_WPREV]) / dt if dt > 0.0 else 0.0
     return 1.0
 
 
@@ -377,6 +385,7 @@ def init_state(state, applied_force, sump_temperature, p):
     state[S_FPREV] = fp
     state[S_DT] = 0.0
     state[S_PPREV] = 0.0
+    state[S_WPREV] = 0.0
     for j in range(P.MAX_DISCOVERED_TERMS):
         state[S_TERM0 + j] = 0.0
     state[M_VISC_OK] = 0.0
@@ -461,6 +470,7 @@ def advance(state, slip, sump_temperature, dt, p, d, scratch):
     state[S_FPREV] = state[S_FPACK]
     state[S_DT] = dt
     state[S_PPREV] = state[S_POWER]
+    state[S_WPREV] = min(max(slip, -SLIP_LIMIT), SLIP_LIMIT)
     n = int(math.ceil(dt / MAX_STEP_S))
     if n < 1:
         n = 1

@@ -30,5 +30,5 @@ DEFAULT_LOCK_SLIP_RAD_S = 1e-3
 # signals the discovered terms are built from (clutch_model.discovery.terms names them) and
 # the two kinds of term (a multiplier on mu_f, an additive torque); the kernels read these
 (SIG_NONE, SIG_PRESSURE, SIG_PACK_TEMP, SIG_SLIP_ABS, SIG_SLIP_POWER, SIG_ENERGY,
- SIG_FORCE_RATE, SIG_SIN_ANGLE, SIG_COS_ANGLE, SIG_SLIP, SIG_SLIP_SIGN) = range(11)
+ SIG_FORCE_RATE, SIG_SIN_ANGLE, SIG_COS_ANGLE, SIG_SLIP, SIG_SLIP_SIGN, SIG_SLIP_RATE) = range(12)
 TERM_FRICTION, TERM_TORQUE = 1, 2

@@ -119,3 +119,28 @@ def test_an_unresolved_time_constant_has_the_interval_zero_to_infinity():
     assert tau_interval_s(0.08, 1e3) == [0.0, math.inf]
     lo, hi = tau_interval_s(0.08, 0.5)
     assert lo == pytest.approx(0.08 * math.exp(-0.5)) and hi == pytest.approx(0.08 * math.exp(0.5))
+
+
+def test_slip_rate_torque_term_reads_an_inertia_as_the_plant_applies_it():
+    """torque:slip_rate (an inertia J between the clutch and the torque sensor reads J dw/dt):
+    the plant adds c x the slip's change over the last step, the feature reproduces it, and on
+    a sine of the slip it is the derivative to the step's first order."""
+    t = np.arange(0.0, 2.0, 0.002)
+    slip = 4.0 + 2.0 * np.sin(2 * np.pi * 1.5 * t)
+    force = np.full(t.size, 6000.0)
+    sump = np.full(t.size, 50.0)
+    camp = Campaign([Run("r", t, force, slip, sump, torque_measured_nm=np.zeros(t.size))])
+    rc1 = load_model()
+    term = Term.from_id("torque:slip_rate")
+    assert term in default_library()
+    assert term.units == "N·m/(rad/s²)"
+    c = 0.25
+    sim0 = simulate(rc1, t, force, slip, sump)
+    sim = simulate(rc1.with_mechanisms([make_mechanism("discovered", terms=[term.id], coefficients=[c])]),
+                   t, force, slip, sump)
+    g = term.feature(TermSignals.from_simulation(camp, sim))
+    # the added torque also heats the pack a little (the friction moves by ~1 % of the term)
+    np.testing.assert_allclose(sim.torque_nm - sim0.torque_nm, c * g, atol=0.02 * np.max(np.abs(c * g)))
+    assert g[0] == 0.0
+    exact = 2.0 * 2 * np.pi * 1.5 * np.cos(2 * np.pi * 1.5 * (t[1:] - 0.001))   # the step's midpoint
+    np.testing.assert_allclose(g[1:], exact, rtol=1e-3, atol=1e-3)

@@ -19,7 +19,9 @@ Term ids read ``<kind>:<signal>[*<signal>][@<tau>s]``:
   ``slip_abs`` |ω| [rad/s], ``slip`` ω [rad/s], ``slip_sign`` sign(ω), ``slip_power`` |ω·T|
   of the previous sample's output [kW], ``energy`` dissipated since the campaign start [MJ],
   ``force_rate`` pack-force rate over the last step [kN/s], ``sin_slip_angle`` /
-  ``cos_slip_angle`` of the slip angle ∫ω dt since the run start (once per revolution);
+  ``cos_slip_angle`` of the slip angle ∫ω dt since the run start (once per revolution),
+  ``slip_rate`` the slip's change over the last step [rad/s²] (0 on a run's first row; an
+  inertia between the clutch and the torque sensor reads J·dω/dt);
 * ``@<tau>s``: the product passes a first-order low-pass with time constant tau (a dynamic
   on the friction or torque path, e.g. a surface temperature that follows the slip power),
   its state 0 at each run start.
@@ -47,6 +49,7 @@ SIGNALS = {
     "cos_slip_angle": K.SIG_COS_ANGLE,
     "slip": K.SIG_SLIP,
     "slip_sign": K.SIG_SLIP_SIGN,
+    "slip_rate": K.SIG_SLIP_RATE,
 }
 KINDS = {"mu": K.TERM_FRICTION, "torque": K.TERM_TORQUE}
 _TERM_RE = re.compile(r"^(mu|torque):([a-z_]+)(?:\*([a-z_]+))?(?:@([0-9.eE+-]+)s)?$")
