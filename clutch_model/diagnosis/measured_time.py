@@ -297,8 +297,10 @@ def measured_time_campaign(runs, rate_hz: float | None = None):
 
 
 def topics_unaligned(runs) -> bool:
-    """True when some run's measured-torque stamps are not all force stamps (the replay
-    grid would then hold each torque sample to later force rows)."""
+    """True when some run's measured-torque stamps are not all force stamps, or leave force
+    stamps between them without a torque sample (a slower torque on the force's clock, or a
+    dropout of the torque topic): the replay grid would then hold each torque sample to later
+    force rows, a stale reading that looks like a delay."""
     for run in runs:
         tq = run.torque_measured_t
         if tq is None or not tq.size or "applied_force" not in run.samples:
@@ -306,5 +308,8 @@ def topics_unaligned(runs) -> bool:
         tf = run.samples["applied_force"][0]
         pos = np.minimum(np.searchsorted(tf, tq), tf.size - 1)
         if np.any(np.abs(tf[pos] - tq) > 1e-9):
+            return True
+        within = np.count_nonzero((tf >= tq[0] - 1e-9) & (tf <= tq[-1] + 1e-9))
+        if within > np.unique(pos).size:
             return True
     return False

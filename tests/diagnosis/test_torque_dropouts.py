@@ -56,3 +56,27 @@ def test_no_gap_no_extra_rows():
     camp = measured_time_campaign(Campaign([_run(np.sort(jittered))]), rate_hz=1.0)
     assert np.isfinite(camp.torque_measured).sum() == stamps.size
     assert camp.t.size <= stamps.size + 4                             # the 1 Hz fill only
+
+
+def test_a_torque_on_the_force_clock_is_aligned_only_when_it_has_every_stamp():
+    """On one clock the replay grid compares each force row with the torque sample at it; a
+    slower torque on that clock, or a dropout, would leave rows holding a stale sample."""
+    from clutch_model.diagnosis.measured_time import topics_unaligned
+    tf = np.arange(0.0, 3.0, 0.005)
+
+    def with_torque(tq):
+        return [_run_on_force_clock(tf, tq)]
+    assert not topics_unaligned(with_torque(tf))
+    assert not topics_unaligned(with_torque(tf[10:-10]))          # starts late, ends early: no row held
+    assert topics_unaligned(with_torque(tf[::5]))                 # 40 Hz on the 200 Hz clock
+    dropout = (tf > 1.0) & (tf < 1.2)
+    assert topics_unaligned(with_torque(tf[~dropout]))
+    assert topics_unaligned(with_torque(tf + 0.0007))              # its own clock
+
+
+def _run_on_force_clock(tf, tq):
+    zeros = np.zeros(tf.size)
+    samples = {"applied_force": (tf, zeros + 5000.0), "slip_speed": (tf, zeros + 3.0),
+               "sump_temperature": (tf, zeros + 60.0), "measured_torque": (tq, np.zeros(tq.size))}
+    return Run(name="r", t=tf, applied_force_n=zeros + 5000.0, slip_speed_rad_s=zeros + 3.0,
+               sump_temperature_c=zeros + 60.0, torque_measured_nm=zeros, samples=samples)
