@@ -33,11 +33,20 @@ from clutch_model.formats.bag_reader import Campaign
 from clutch_model.identification.calibrate import calibrate_friction
 from clutch_model.plant.friction import monomials
 from clutch_model.plant.params import ClutchModel
+from clutch_model.prediction import predict_campaign
 
 ENTRY_WINDOW_S = 0.2        # rows before a lock phase's start (the diagnosis' lock pad)
 NOISE_SDS = 4.0             # the measured |slip| above this many slip-sensor noise sds ...
 COEFFICIENTS = (5, 10)      # mu_S and omega_S, constant terms
+# mu_S's slopes in pressure (a6) and pack temperature (a8) join where the rows before the lock
+# phases spread over this much of each (10th to 90th percentile) and at least MIN_ENTRIES_SLOPES
+# phases: the ninth generator's none campaign with lock-up had mu_S falling from 0.183 at 50 C
+# to 0.145 at 80 C (mu_C 0.174 there); a5 alone put mu_S at 0.152 and left 62 N*m on the rows
+PRESSURE_SPREAD_MPA = 0.5
+TEMPERATURE_SPREAD_C = 10.0
+MIN_ENTRIES_SLOPES = 6
 MIN_ROWS = 20
+EDGE_PERIODS = 2.0          # rows stop this many slip sample periods before the last slipping sample
 MIN_ENTRIES = 2
 MIN_RMSE_CUT = 0.10         # kept when the RMSE on the entry rows falls by at least this fraction
 MAX_ITERATIONS = 15
@@ -57,9 +66,11 @@ class StaticFrictionFit:
     omega_s_before_rad_s: float = float("nan")
     omega_s_after_rad_s: float = float("nan")
     note: str = ""
+    coefficients: list = None               # the friction coefficients fitted (a5, a10, ...)
 
     def to_json(self) -> dict:
-        out = {"kept": self.kept, "rows": self.rows, "lock_entries": self.entries, "note": self.note}
+        out = {"kept": self.kept, "rows": self.rows, "lock_entries": self.entries, "note": self.note,
+               "coefficients": [f"a{k}" for k in (self.coefficients or [])]}
         for k in ("rmse_before_nm", "rmse_after_nm", "mu_s_before", "mu_s_after",
                   "omega_s_before_rad_s", "omega_s_after_rad_s"):
             v = getattr(self, k)
@@ -71,7 +82,8 @@ class StaticFrictionFit:
             return f"static friction ({which}): {self.note}"
         return (f"static friction ({which}), {self.rows} rows before {self.entries} lock phases: "
                 f"RMSE {self.rmse_before_nm:.1f} -> {self.rmse_after_nm:.1f} N*m, mu_S {self.mu_s_before:.3f} -> "
-                f"{self.mu_s_after:.3f}, omega_S {self.omega_s_before_rad_s:.3f} -> {self.omega_s_after_rad_s:.3f} rad/s"
+                f"{self.mu_s_after:.3f}, omega_S {self.omega_s_before_rad_s:.3f} -> {self.omega_s_after_rad_s:.3f} rad/s "
+                f"({', '.join(f'a{k}' for k in (self.coefficients or []))})"
                 + ("" if self.kept else f" ({self.note})"))
 
 
@@ -94,12 +106,18 @@ def lock_entry_rows(campaign: Campaign, lock_results, window_s: float = ENTRY_WI
         else:
             ts, ws = t, np.abs(np.asarray(run.slip_speed_rad_s, float))
         above = ts[ws > floor]
+        # the clutch may lock anywhere between the last slipping sample and the next, and a
+        # slipping sample that close is as likely the sensor's noise about a locked clutch: the
+        # rows stop EDGE_PERIODS slip periods before it (on the ninth generator's none campaign,
+        # 100 Hz slip, the measured torque fell from 1312 to 283 N*m within 2 ms after a
+        # sample still reading 0.0062 rad/s; the true model was 1100 N*m off there)
+        margin = EDGE_PERIODS * float(np.median(np.diff(ts))) if ts.size > 1 else 0.0
         for a, _b in res.segments:
             k = np.searchsorted(above, a) - 1
             if k < 0:
                 continue
             edge = above[k]               # the last slip sample above the floor before the phase
-            near = (t > a - window_s) & (t <= edge) & slipping
+            near = (t > a - window_s) & (t <= edge - margin) & slipping
             if near.any():
                 # the slip's sign as it approaches the lock: a row of the other sign is the slip
                 # sensor's noise (slipping at 0.003 rad/s, its noise 0.003 rad/s), and the model's
@@ -126,20 +144,34 @@ def fit_static_friction(model: ClutchModel, campaign: Campaign, rows: np.ndarray
     n = int(np.count_nonzero(rows & np.isfinite(campaign.torque_measured)))
     if n < MIN_ROWS or entries < MIN_ENTRIES:
         return model, StaticFrictionFit(False, n, entries, note=f"{n} rows before {entries} lock phases: too few")
-    # mu_S and omega_S reported at the entry rows' median pressure and sump temperature
-    pressure_mpa = float(np.median(campaign.force[rows])) / model.nominal_area_m2 / 1e6
-    theta_c = float(np.median(campaign.sump[rows]))
+    # mu_S and omega_S reported at the entry rows' median pressure and pack temperature
+    try:
+        pred = predict_campaign(model, campaign)
+    except (ClutchSimError, ValueError, FloatingPointError) as e:
+        return model, StaticFrictionFit(False, n, entries, note=f"simulation failed: {e}")
+    pressure = np.asarray(pred.sim.pressure_mpa, float)[rows]
+    pack = np.asarray(pred.pack_temperature_c, float)[rows]
+    pressure_mpa, theta_c = float(np.median(pressure)), float(np.median(pack))
     mu0, ws0 = _static_at(model, pressure_mpa, theta_c)
+    coefficients = list(COEFFICIENTS)
+    if entries >= MIN_ENTRIES_SLOPES:
+        p10, p90 = np.percentile(pressure, [10, 90])
+        t10, t90 = np.percentile(pack, [10, 90])
+        coefficients += [6] if p90 - p10 >= PRESSURE_SPREAD_MPA else []
+        coefficients += [8] if t90 - t10 >= TEMPERATURE_SPREAD_C else []
     # the whole campaign is simulated (the dissipated energy carries from run to run)
     try:
-        cal = calibrate_friction(model, campaign, coefficients=list(COEFFICIENTS), rows=rows,
+        cal = calibrate_friction(model, campaign, coefficients=sorted(coefficients), rows=rows,
                                  max_iterations=MAX_ITERATIONS)
     except (ClutchSimError, ValueError, FloatingPointError) as e:
         return model, StaticFrictionFit(False, n, entries, note=f"fit failed: {e}")
     mu1, ws1 = _static_at(cal.model, pressure_mpa, theta_c)
-    fit = StaticFrictionFit(False, n, entries, cal.rmse_before, cal.rmse_after, mu0, mu1, ws0, ws1)
-    if not (np.isfinite(cal.rmse_after) and cal.rmse_after <= (1.0 - MIN_RMSE_CUT) * cal.rmse_before
-            and cal.positive):
+    fit = StaticFrictionFit(False, n, entries, cal.rmse_before, cal.rmse_after, mu0, mu1, ws0, ws1,
+                            coefficients=sorted(coefficients))
+    if not cal.positive:
+        fit.note = "kept as it was: the fitted friction is not positive over the car's range"
+        return model, fit
+    if not (np.isfinite(cal.rmse_after) and cal.rmse_after <= (1.0 - MIN_RMSE_CUT) * cal.rmse_before):
         fit.note = f"kept as it was: the fit cut the RMSE by less than {100 * MIN_RMSE_CUT:.0f} %"
         return model, fit
     fit.kept = True

@@ -12,6 +12,7 @@ from clutch_model.diagnosis.static_friction import (fit_static_friction, lock_en
 from clutch_model.formats.bag_reader import Campaign, Run
 from clutch_model.plant.params import load_model
 from clutch_model.plant.simulate import simulate
+from clutch_model.prediction import predict_campaign
 
 RATE_HZ = 500.0
 
@@ -86,16 +87,20 @@ def test_static_friction_recovered_from_the_lock_entries(reference):
     start = _with_static(reference, -0.01, 0.05)          # the bench never slipped that slowly
     fitted, fit = fit_static_friction(start, with_entry_torque(camp, torque, rows), rows, entries)
     assert fit.kept
-    p_mpa = float(np.median(camp.force[rows])) / reference.nominal_area_m2 / 1e6
-    mu_true, ws_true = _static_at(truth, p_mpa, 60.0)
-    mu_fit, ws_fit = _static_at(fitted, p_mpa, 60.0)
+    # compared where the rows are: their median contact pressure and pack temperature
+    sim = predict_campaign(truth, camp).sim
+    p_mpa, theta_c = float(np.median(sim.pressure_mpa[rows])), float(np.median(sim.pack_temperature_c[rows]))
+    mu_true, ws_true = _static_at(truth, p_mpa, theta_c)
+    mu_fit, ws_fit = _static_at(fitted, p_mpa, theta_c)
     assert mu_fit == pytest.approx(mu_true, rel=0.03)
     assert fit.mu_s_after == pytest.approx(mu_true, rel=0.03)
     assert ws_fit == pytest.approx(ws_true, rel=0.35)
     assert fit.rmse_after_nm < 0.25 * fit.rmse_before_nm
-    # only the static terms moved, the mechanisms kept
+    # only the static terms moved (mu_S's constant and, the rows spreading over 0.5 MPa, its
+    # slope in pressure; omega_S's constant), the mechanisms kept
     moved = np.flatnonzero(fitted.friction_coefficients != start.friction_coefficients)
-    assert set(moved) <= {5, 10}
+    assert set(moved) <= set(fit.coefficients) <= {5, 6, 8, 10}
+    assert {5, 10} <= set(fit.coefficients)
     assert fitted.mechanisms == start.mechanisms
 
 
