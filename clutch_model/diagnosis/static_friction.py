@@ -67,11 +67,14 @@ class StaticFrictionFit:
     omega_s_after_rad_s: float = float("nan")
     note: str = ""
     coefficients: list = None               # the friction coefficients fitted (a5, a10, ...)
+    held_out_before_nm: float = float("nan")  # fitted on every other phase: RMSE on the others
+    held_out_after_nm: float = float("nan")
 
     def to_json(self) -> dict:
         out = {"kept": self.kept, "rows": self.rows, "lock_entries": self.entries, "note": self.note,
                "coefficients": [f"a{k}" for k in (self.coefficients or [])]}
-        for k in ("rmse_before_nm", "rmse_after_nm", "mu_s_before", "mu_s_after",
+        for k in ("rmse_before_nm", "rmse_after_nm", "held_out_before_nm", "held_out_after_nm",
+                  "mu_s_before", "mu_s_after",
                   "omega_s_before_rad_s", "omega_s_after_rad_s"):
             v = getattr(self, k)
             out[k] = float(v) if np.isfinite(v) else None
@@ -140,7 +143,8 @@ def _static_at(model: ClutchModel, pressure_mpa: float, theta_c: float) -> tuple
 def fit_static_friction(model: ClutchModel, campaign: Campaign, rows: np.ndarray, entries: int) -> tuple:
     """-> (model, StaticFrictionFit): a5 and a10 of ``model`` fitted on ``rows`` of ``campaign``
     (whose measured torque is kept there), the other coefficients and the mechanisms as they
-    are; the model unchanged unless the fit cuts the RMSE on the rows by MIN_RMSE_CUT."""
+    are; the model unchanged unless a fit on every other lock phase's rows cuts the RMSE on the
+    others' by MIN_RMSE_CUT, and the fit on all of them cuts theirs as much."""
     n = int(np.count_nonzero(rows & np.isfinite(campaign.torque_measured)))
     if n < MIN_ROWS or entries < MIN_ENTRIES:
         return model, StaticFrictionFit(False, n, entries, note=f"{n} rows before {entries} lock phases: too few")
@@ -159,8 +163,17 @@ def fit_static_friction(model: ClutchModel, campaign: Campaign, rows: np.ndarray
         t10, t90 = np.percentile(pack, [10, 90])
         coefficients += [6] if p90 - p10 >= PRESSURE_SPREAD_MPA else []
         coefficients += [8] if t90 - t10 >= TEMPERATURE_SPREAD_C else []
-    # the whole campaign is simulated (the dissipated energy carries from run to run)
+    # held out first: fitted on every other lock phase's rows, the fit must cut the RMSE on the
+    # others' by MIN_RMSE_CUT (a tenth generator's none campaign, rows already at 5.6 N*m with
+    # 3.2 N*m of noise: fitted on all of them the cut was 10.7 %, and the unseen drives' replay
+    # went from 4.8 to 12.9 N*m)
+    a_rows, b_rows = _alternate_phases(rows)
     try:
+        half = calibrate_friction(model, campaign, coefficients=sorted(coefficients), rows=a_rows,
+                                  max_iterations=MAX_ITERATIONS)
+        held_before = _rmse_on(model, campaign, b_rows)
+        held_after = _rmse_on(half.model, campaign, b_rows)
+        # the whole campaign is simulated (the dissipated energy carries from run to run)
         cal = calibrate_friction(model, campaign, coefficients=sorted(coefficients), rows=rows,
                                  max_iterations=MAX_ITERATIONS)
     except (ClutchSimError, ValueError, FloatingPointError) as e:
@@ -171,11 +184,33 @@ def fit_static_friction(model: ClutchModel, campaign: Campaign, rows: np.ndarray
     if not cal.positive:
         fit.note = "kept as it was: the fitted friction is not positive over the car's range"
         return model, fit
+    fit.held_out_before_nm, fit.held_out_after_nm = held_before, held_after
+    if not (np.isfinite(held_after) and held_after <= (1.0 - MIN_RMSE_CUT) * held_before):
+        fit.note = (f"kept as it was: fitted on every other lock phase, it cut the RMSE on the others by "
+                    f"less than {100 * MIN_RMSE_CUT:.0f} % ({held_before:.1f} -> {held_after:.1f} N*m)")
+        return model, fit
     if not (np.isfinite(cal.rmse_after) and cal.rmse_after <= (1.0 - MIN_RMSE_CUT) * cal.rmse_before):
         fit.note = f"kept as it was: the fit cut the RMSE by less than {100 * MIN_RMSE_CUT:.0f} %"
         return model, fit
     fit.kept = True
     return cal.model.with_mechanisms(model.mechanisms), fit
+
+
+def _alternate_phases(rows: np.ndarray) -> tuple:
+    """(rows of the 1st, 3rd, ... lock phase, rows of the 2nd, 4th, ...): a phase's rows are
+    one contiguous stretch of ``rows``."""
+    idx = np.flatnonzero(rows)
+    phase = np.concatenate([[0], np.cumsum(np.diff(idx) > 1)])
+    a, b = np.zeros(rows.size, bool), np.zeros(rows.size, bool)
+    a[idx[phase % 2 == 0]] = True
+    b[idx[phase % 2 == 1]] = True
+    return a, b
+
+
+def _rmse_on(model: ClutchModel, campaign: Campaign, rows: np.ndarray) -> float:
+    pred = predict_campaign(model, campaign).torque_nm
+    m = rows & np.isfinite(campaign.torque_measured)
+    return float(np.sqrt(np.mean((pred[m] - campaign.torque_measured[m]) ** 2))) if m.any() else float("nan")
 
 
 def with_entry_torque(campaign: Campaign, torque_by_run: list, rows: np.ndarray) -> Campaign:
