@@ -103,11 +103,12 @@ def lock_entry_rows(campaign: Campaign, lock_results, window_s: float = ENTRY_WI
         t = np.asarray(run.t, float)
         m = np.zeros(t.size, bool)
         floor = max(NOISE_SDS * res.noise_sigma_rad_s, res.threshold_exit_rad_s)
-        slipping = np.abs(np.asarray(run.slip_speed_rad_s, float)) > floor
+        w = np.asarray(run.slip_speed_rad_s, float)
+        slipping = np.abs(w) > floor
         if "slip_speed" in getattr(run, "samples", {}):
             ts, ws = np.asarray(run.slip_raw_t, float), np.abs(np.asarray(run.slip_raw_rad_s, float))
         else:
-            ts, ws = t, np.abs(np.asarray(run.slip_speed_rad_s, float))
+            ts, ws = t, np.abs(w)
         above = ts[ws > floor]
         # the clutch may lock anywhere between the last slipping sample and the next, and a
         # slipping sample that close is as likely the sensor's noise about a locked clutch: the
@@ -125,8 +126,7 @@ def lock_entry_rows(campaign: Campaign, lock_results, window_s: float = ENTRY_WI
                 # the slip's sign as it approaches the lock: a row of the other sign is the slip
                 # sensor's noise (slipping at 0.003 rad/s, its noise 0.003 rad/s), and the model's
                 # torque flips with it (a 1200 N*m phase read -1226 against 1486 N*m measured)
-                sign = np.sign(np.median(np.asarray(run.slip_speed_rad_s, float)[near]))
-                near &= np.sign(np.asarray(run.slip_speed_rad_s, float)) == sign
+                near &= np.sign(w) == np.sign(np.median(w[near]))
             if near.any():
                 entries += 1
                 m |= near
@@ -136,7 +136,7 @@ def lock_entry_rows(campaign: Campaign, lock_results, window_s: float = ENTRY_WI
 
 def _static_at(model: ClutchModel, pressure_mpa: float, theta_c: float) -> tuple:
     a = model.friction_coefficients
-    M = monomials(pressure_mpa, theta_c)
+    M = monomials(pressure_mpa, theta_c)        # P and theta clamped to the box, as the kernel does
     return float(M @ a[5:10]), float(M @ a[10:15])
 
 
@@ -171,8 +171,8 @@ def fit_static_friction(model: ClutchModel, campaign: Campaign, rows: np.ndarray
     try:
         half = calibrate_friction(model, campaign, coefficients=sorted(coefficients), rows=a_rows,
                                   max_iterations=MAX_ITERATIONS)
-        held_before = _rmse_on(model, campaign, b_rows)
-        held_after = _rmse_on(half.model, campaign, b_rows)
+        held_before = _rmse_on(pred.torque_nm, campaign, b_rows)
+        held_after = _rmse_on(predict_campaign(half.model, campaign).torque_nm, campaign, b_rows)
         # the whole campaign is simulated (the dissipated energy carries from run to run)
         cal = calibrate_friction(model, campaign, coefficients=sorted(coefficients), rows=rows,
                                  max_iterations=MAX_ITERATIONS)
@@ -193,7 +193,7 @@ def fit_static_friction(model: ClutchModel, campaign: Campaign, rows: np.ndarray
         fit.note = f"kept as it was: the fit cut the RMSE by less than {100 * MIN_RMSE_CUT:.0f} %"
         return model, fit
     fit.kept = True
-    return cal.model.with_mechanisms(model.mechanisms), fit
+    return cal.model, fit          # calibrate_friction keeps the model's mechanisms
 
 
 def _alternate_phases(rows: np.ndarray) -> tuple:
@@ -207,10 +207,9 @@ def _alternate_phases(rows: np.ndarray) -> tuple:
     return a, b
 
 
-def _rmse_on(model: ClutchModel, campaign: Campaign, rows: np.ndarray) -> float:
-    pred = predict_campaign(model, campaign).torque_nm
+def _rmse_on(predicted_nm: np.ndarray, campaign: Campaign, rows: np.ndarray) -> float:
     m = rows & np.isfinite(campaign.torque_measured)
-    return float(np.sqrt(np.mean((pred[m] - campaign.torque_measured[m]) ** 2))) if m.any() else float("nan")
+    return float(np.sqrt(np.mean((predicted_nm[m] - campaign.torque_measured[m]) ** 2))) if m.any() else float("nan")
 
 
 def with_entry_torque(campaign: Campaign, torque_by_run: list, rows: np.ndarray) -> Campaign:

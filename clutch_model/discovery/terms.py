@@ -60,14 +60,16 @@ class TermSignals:
         dt[rs] = 0.0
         power_prev = np.concatenate([[0.0], sim.power_w[:-1]])
         power_prev[rs] = 0.0
-        fpack = np.asarray(sim.pack_force_n, float)
-        df = np.diff(fpack, prepend=fpack[:1])
-        df[rs] = 0.0
-        rate = np.where(dt > 0, df / np.where(dt > 0, dt, 1.0), 0.0) * 1e-3
+
+        def per_step(x):
+            """x's change over the last step / its length (0 on each run's first row)."""
+            dx = np.diff(x, prepend=x[:1])
+            dx[rs] = 0.0
+            return np.where(dt > 0, dx / np.where(dt > 0, dt, 1.0), 0.0)
+
+        rate = per_step(np.asarray(sim.pack_force_n, float)) * 1e-3
         # slip rate over the last step (kernel: the slip held over the last advance)
-        dw = np.diff(w, prepend=w[:1])
-        dw[rs] = 0.0
-        slip_rate = np.where(dt > 0, dw / np.where(dt > 0, dt, 1.0), 0.0)
+        slip_rate = per_step(w)
         # slip angle: left Riemann sum of the held slip, restarted at each run (kernel order)
         incr = np.concatenate([[0.0], w[:-1] * np.diff(t)])
         incr[rs] = 0.0
