@@ -46,6 +46,7 @@ from clutch_model.diagnosis.force_dynamics import (named_or_constant_play, named
                                                    none_or_force_sensor_lag, none_or_sensor_play,
                                                    none_or_force_offset, none_or_rate_limit, named_or_rate_limit)
 from clutch_model.diagnosis.lag_rivals import named_or_varying_lag
+from clutch_model.diagnosis.sump_reading import choose_sump_reading
 from clutch_model.diagnosis.static_friction import fit_static_friction, lock_entry_rows, with_entry_torque
 from clutch_model.diagnosis.slip_acceleration import named_or_slip_acceleration, none_or_slip_acceleration
 from clutch_model.diagnosis.torque_line import none_or_torque_line
@@ -100,30 +101,6 @@ def diagnosis_candidate_ids() -> list:
     if "torque_sensor_lag" in CATALOG and "torque_sensor_lag" not in ids:
         ids.append("torque_sensor_lag")
     return ids
-
-
-def smooth_sump(campaign: Campaign, window_s: float = 2.0) -> Campaign:
-    """The campaign with each run's sump temperature smoothed (local linear Savitzky-Golay fit
-    over window_s). The sump changes over minutes, but its sensor noise enters the model
-    through the initial pack temperature, i.e. the viscosity during the first engagement; at
-    cold, slow films 0.5 C of noise in one sample moves an engagement transient by ~15 N*m.
-    Diagnosis is about the plant, so it works on the cleaner input (replay keeps the contract's
-    raw first sample)."""
-    from dataclasses import replace
-
-    from scipy.signal import savgol_filter
-
-    runs = []
-    for r in campaign.runs:
-        dt = float(np.median(np.diff(r.t))) if len(r) > 2 else 1.0
-        win = int(min(len(r), max(5, round(window_s / dt)))) // 2 * 2 + 1
-        if win > len(r):
-            win -= 2
-        sump = r.sump_temperature_c
-        if win >= 5:
-            sump = savgol_filter(sump, win, 1, mode="interp")
-        runs.append(replace(r, sump_temperature_c=np.asarray(sump, float)))
-    return Campaign(runs)
 
 
 def choose_held_out(names: list, runs=None) -> list:
@@ -351,7 +328,11 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
         campaign = decimate_campaign(campaign, plan, measured_time)
         say(plan.describe())
     timings["prepare (regrid, decimate)"] = time.perf_counter() - tick
-    campaign = smooth_sump(campaign)
+    # the sump temperature smoothed, or as logged when the torque sides with it (sump_reading)
+    sump = choose_sump_reading(campaign, bench_model)
+    say(sump.describe())
+    input_info = {**input_info, **sump.to_dict()}
+    campaign = sump.apply(campaign)
     # lock-up phases (found from the data, diagnosis.lockup): the driveline sets the torque
     torque_by_run = [r.torque_measured_nm for r in campaign.runs]
     campaign, locked, lock_results = without_locked_rows(campaign)

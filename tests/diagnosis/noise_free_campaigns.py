@@ -6,7 +6,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from clutch_model.diagnosis.engine import smooth_sump
+from clutch_model.diagnosis.sump_reading import smooth_sump
 from clutch_model.discovery.synthetic import _campaign_from
 from clutch_model.formats.bag_reader import Campaign
 from clutch_model.plant.params import load_model
