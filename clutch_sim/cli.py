@@ -3,12 +3,14 @@
 Every subcommand lives in its own module under clutch_sim/commands/ with two functions,
 ``add_parser(subparsers)`` and ``run(args) -> int``; modules keep heavy imports inside run().
 User errors (clutch_model.errors.ClutchSimError and OSError on user files) are caught here,
-once, and printed as one line with a non-zero exit code.
+once, and printed as one line with a non-zero exit code; anything else is a defect, also one
+line (exit code 3) unless CLUTCH_SIM_TRACEBACK is set.
 """
 from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 
 COMMANDS = ["replay", "synth", "fit_friction", "fit_thermal", "calibrate", "montecarlo",
@@ -83,6 +85,13 @@ def _main(argv=None) -> int:
         lead = "\n" if sys.stderr.isatty() else ""   # end a progress bar line first
         print(f"{lead}clutch-sim {args.command}: interrupted (files already written are kept)", file=sys.stderr)
         return 130
+    except Exception as exc:        # a defect, not bad input: one line too, the traceback on request
+        if os.environ.get("CLUTCH_SIM_TRACEBACK"):
+            raise
+        sys.stdout.flush()
+        print(f"clutch-sim {args.command}: internal error: {type(exc).__name__}: {exc} (files already written "
+              f"are kept; CLUTCH_SIM_TRACEBACK=1 shows where)", file=sys.stderr)
+        return 3
 
 
 if __name__ == "__main__":

@@ -25,6 +25,8 @@ current). Conventions shared by every subcommand:
 - Bad input (missing or unreadable files, malformed bags or CSV, out-of-range options) ends with
   one line `clutch-sim COMMAND: error: REASON` on stderr and exit code 1 (2 for a malformed
   command line); no traceback. Files already written are kept; Ctrl-C ends with exit code 130.
+  An internal error (a defect, not the input) also ends in one line, `clutch-sim COMMAND:
+  internal error: ...`, exit code 3; `CLUTCH_SIM_TRACEBACK=1` shows the traceback instead.
 - Long work shows a progress bar on stderr.
 - Bag inputs and the replay grid are described in [bags.md](bags.md), the diagnosis report in
   [report.md](report.md).
