@@ -15,6 +15,7 @@ from clutch_model.diagnosis.input_timing import (BETA_HELD, BETA_HELD_MAX, choos
                                                  step_mean_of_held, with_held_inputs)
 from clutch_model.diagnosis.measured_time import measured_time_campaign
 from clutch_model.formats.bag_reader import Campaign, Run
+from clutch_model.plant.mechanisms import make_mechanism
 from clutch_model.plant.params import load_model
 from clutch_model.plant.simulate import simulate
 
@@ -28,11 +29,13 @@ def test_step_mean_of_a_staircase_is_its_integral():
     assert np.allclose(held_at(ts, vs, np.array([-1.0, 0.0, 0.99, 1.0, 7.0])), [0, 0, 0, 10, 20])
 
 
-def _log(held_truth: bool, seed: int, duration_s: float = 12.0, delay_s: float = 0.0):
+def _log(held_truth: bool, seed: int, duration_s: float = 12.0, delay_s: float = 0.0, hysteresis: float = 0.0):
     """A run as read from a bag: force at 200 Hz (jittered), slip at 100 Hz, torque at 1 kHz
-    (AR(1) noise), the plant on a 1 kHz grid."""
+    (AR(1) noise), the plant on a 1 kHz grid (with an actuator hysteresis of band
+    ``hysteresis`` when given; the model returned has none)."""
     rng = np.random.default_rng(seed)
     model = load_model(None)
+    plant = model.with_mechanisms([make_mechanism("actuator_hysteresis", ratio=hysteresis)]) if hysteresis else model
     fine = np.arange(0.0, duration_s, 1e-3)
     # controller-like: ramps and holds between 500 N and 14 kN, and a sweep
     knots_t = np.arange(0.0, duration_s + 0.5, 0.5)
@@ -50,7 +53,7 @@ def _log(held_truth: bool, seed: int, duration_s: float = 12.0, delay_s: float =
     else:            # the plant driven by the continuous signals the logs sample
         force_in, slip_in = force_cont, slip_cont
     sump = np.full(fine.size, 60.0)
-    torque = simulate(model, fine, force_in, slip_in, sump).torque_nm
+    torque = simulate(plant, fine, force_in, slip_in, sump).torque_nm
     noise = np.zeros(fine.size)
     e = rng.normal(0.0, 1.0, fine.size)
     for k in range(1, fine.size):
@@ -118,3 +121,16 @@ def test_a_delay_in_the_data_keeps_the_linear_reading():
     choice = choose_input_timing(with_midpoint_force(regridded), model)
     assert choice.beta > 2 * BETA_HELD_MAX, choice
     assert not choice.held
+
+
+def test_a_hysteresis_in_a_held_log_does_not_take_the_weight():
+    """A 5 % actuator hysteresis in a log made as replay reads it: the torque it moves follows
+    the sign of the force's rate, as the held reading's half-period lag does. Its shape in the
+    regression holds it apart: the held reading is chosen with its weight near 1, and the band
+    found is near the true one."""
+    model, campaign = _log(True, seed=6, hysteresis=0.05)
+    linear = with_midpoint_force(measured_time_campaign(campaign, rate_hz=1.0))
+    choice = choose_input_timing(linear, model)
+    assert choice.held, choice
+    assert abs(choice.beta - 1.0) < 0.3, choice
+    assert 0.03 < choice.hysteresis_band < 0.07, choice
