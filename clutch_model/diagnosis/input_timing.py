@@ -146,6 +146,34 @@ def _held_run_inputs(run, t: np.ndarray) -> tuple:
     return step_mean_of_held(*force, t), held_at(*slip, t)
 
 
+@dataclass
+class ReadingComparison:
+    """Two readings of one campaign's head simulated by one model, on its slipping rows."""
+
+    p_first: np.ndarray      # the first reading's prediction (every row)
+    y: np.ndarray            # the measured torque (every row)
+    ok: np.ndarray           # slipping rows with every value finite
+    d: np.ndarray            # second - first prediction on those rows
+    n: int
+    rms: float               # rms of d
+
+
+def compare_readings(model, first, second, min_slip_rad_s: float = MIN_SLIP_RAD_S) -> ReadingComparison:
+    """``model`` simulated on two readings of the same rows (campaigns ``first`` and
+    ``second``), compared on the rows where the clutch slips (|slip| > ``min_slip_rad_s``:
+    a lock phase's torque is the driveline's) and every value is finite."""
+    from clutch_model.prediction import predict_campaign
+
+    p_first, p_second = (np.asarray(predict_campaign(model, c, energy0_j=0.0).torque_nm, float)
+                         for c in (first, second))
+    y = np.asarray(first.torque_measured, float)
+    ok = (np.isfinite(y) & np.isfinite(p_first) & np.isfinite(p_second)
+          & (np.abs(np.asarray(first.slip, float)) > min_slip_rad_s))
+    d = (p_second - p_first)[ok]
+    n = int(ok.sum())
+    return ReadingComparison(p_first, y, ok, d, n, float(np.sqrt(np.mean(d * d))) if n else 0.0)
+
+
 def choose_input_timing(linear, model, max_rows: int = MAX_ROWS) -> InputTiming:
     """Which reading of the inputs the measured torque sides with (module docstring): the
     model simulated on the linear campaign (``with_midpoint_force`` of the measured-time
@@ -163,14 +191,8 @@ def choose_input_timing(linear, model, max_rows: int = MAX_ROWS) -> InputTiming:
     if not runs:
         return InputTiming(held=False, beta=float("nan"), rows=0, difference_rms_nm=0.0)
     head = Campaign(runs)
-    p_lin, p_held = (np.asarray(predict_campaign(model, c, energy0_j=0.0).torque_nm, float)
-                     for c in (head, with_held_inputs(head)))
-    y = np.asarray(head.torque_measured, float)
-    ok = (np.isfinite(y) & np.isfinite(p_lin) & np.isfinite(p_held)
-          & (np.abs(np.asarray(head.slip, float)) > MIN_SLIP_RAD_S))
-    d = (p_held - p_lin)[ok]
-    n = int(ok.sum())
-    rms = float(np.sqrt(np.mean(d * d))) if n else 0.0
+    cmp = compare_readings(model, head, with_held_inputs(head))
+    p_lin, y, ok, d, n, rms = cmp.p_first, cmp.y, cmp.ok, cmp.d, cmp.n, cmp.rms
     if n < 10 or not rms > 0:
         return InputTiming(held=False, beta=float("nan"), rows=n, difference_rms_nm=rms)
     # the shape of an actuator hysteresis (the same model with a band of HYSTERESIS_PROBE_RATIO,

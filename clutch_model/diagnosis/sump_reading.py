@@ -120,22 +120,16 @@ def choose_sump_reading(campaign, model, max_rows: int = MAX_ROWS) -> SumpReadin
     docstring): ``model`` simulated on both readings of the first ``max_rows`` rows (shared
     by the runs from their starts), the torque regressed on the difference."""
     from clutch_model.diagnosis.input_hold import run_rows
+    from clutch_model.diagnosis.input_timing import compare_readings
     from clutch_model.formats.bag_reader import Campaign
-    from clutch_model.prediction import predict_campaign
 
     per_run = max(max_rows // max(len(campaign.runs), 1), 2)
     runs = [run_rows(r, slice(0, per_run)) for r in campaign.runs if r.torque_measured_nm is not None]
     if not runs:
         return SumpReading(logged=False, beta=float("nan"), rows=0, difference_rms_nm=0.0)
     head = Campaign(runs)
-    p_smooth, p_logged = (np.asarray(predict_campaign(model, c, energy0_j=0.0).torque_nm, float)
-                          for c in (smooth_sump(head), logged_sump(head)))
-    y = np.asarray(head.torque_measured, float)
-    ok = (np.isfinite(y) & np.isfinite(p_smooth) & np.isfinite(p_logged)
-          & (np.abs(np.asarray(head.slip, float)) > MIN_SLIP_RAD_S))
-    d = (p_logged - p_smooth)[ok]
-    n = int(ok.sum())
-    rms = float(np.sqrt(np.mean(d * d))) if n else 0.0
+    cmp = compare_readings(model, smooth_sump(head), logged_sump(head), MIN_SLIP_RAD_S)
+    p_smooth, y, ok, d, n, rms = cmp.p_first, cmp.y, cmp.ok, cmp.d, cmp.n, cmp.rms
     if n < 10 or not rms >= MIN_DIFFERENCE_NM:
         return SumpReading(logged=False, beta=float("nan"), rows=n, difference_rms_nm=rms)
     # the smoothed prediction's rate: a lag or delay in the data (torque ~ p - tau dp/dt) moves
