@@ -166,3 +166,198 @@ def test_a_crossing_window_covers_the_samples_that_cross():
         k = int(raw[0])
         assert det.excluded_at(t)[k:k + 3].all(), (creep, drop)      # old sign, new sign, one after
         assert not det.excluded_at(t)[np.abs(t - t[k]) > 0.1].any()  # and no more than around it
+
+
+def test_interpolate_on_grid():
+    tg = np.array([0.0, 0.1, 0.25, 0.3])
+    y = 3 * tg + 1
+    q = np.array([-0.01, 0.0, 0.05, 0.2, 0.3, 0.31])
+    out = interpolate_on_grid(tg, y, q)
+    assert np.isnan(out[0]) and np.isnan(out[-1])
+    np.testing.assert_allclose(out[1:-1], 3 * q[1:-1] + 1)
+
+
+def sse_by_lag(t_meas, meas, t_grid, model_grid, keep, lags_ms):
+    """Sum of squared residuals of meas(t) against model(t - lag), over common samples."""
+    shifted = [interpolate_on_grid(t_grid, model_grid, t_meas - lag * 1e-3) for lag in lags_ms]
+    ok = keep & np.all(np.isfinite(shifted), axis=0)
+    return np.array([np.sum((meas[ok] - m[ok]) ** 2) for m in shifted])
+
+
+def test_measured_time_removes_the_apparent_delay(short_campaign):
+    """No mechanism; torque at 50 Hz, force at 200 Hz jittered +-1 ms, slip at 100 Hz. Simulated
+    where the measurement is (linear input hold, output at the torque's own stamps) the
+    residual is best aligned at lag 0; the replay grid's held inputs make the model ~2.5 ms
+    late; the measured torque held on the force grid (the replay CSV's column) looks ~10 ms
+    late."""
+    result, paths, runs = short_campaign
+    assert result.spec.clocks["measured_torque"].rate_hz == 50 and not result.spec.mechanisms
+    model = load_model(paths["truth_model"])
+    mts = simulate_at_measured_times(model, runs)
+    res, cmp_grid = replay_at_measured_times(model, runs)
+    lags = np.arange(-20, 20.5, 0.5)
+    sse_meas = sse_zoh = sse_held = 0.0
+    for j, (run, sl) in enumerate(res.campaign.slices()):
+        lock = detect_lockup_run(run)
+        cmp = mts.comparison
+        ms = cmp.run_slice(j)
+        keep = ~lock.at(cmp.t[ms], pad_s=0.1)
+        rows = mts.run_index == j
+        sse_meas = sse_meas + sse_by_lag(cmp.t[ms], cmp.measured[ms], mts.t[rows], mts.torque_pred[rows], keep, lags)
+        sse_zoh = sse_zoh + sse_by_lag(cmp.t[ms], cmp.measured[ms], run.t, res.torque_sim[sl], keep, lags)
+        keep_g = ~lock.at(run.t, pad_s=0.1) & np.isfinite(run.torque_measured_nm)
+        sse_held = sse_held + sse_by_lag(run.t, run.torque_measured_nm, run.t, res.torque_sim[sl], keep_g, lags)
+        # against the noise-free truth at the same stamps, off lock: the true model is close
+        side = sidecar(paths, run.name)
+        ok = cmp.valid[ms] & keep
+        err = cmp.model[ms][ok] - side["torque_true_nm"][ok]
+        assert np.sqrt(np.mean(err ** 2)) < 8.0
+        assert ok.mean() > 0.5
+    best_meas, best_zoh, best_held = (float(lags[np.argmin(x)]) for x in (sse_meas, sse_zoh, sse_held))
+    print("best lags (ms): measured-time", best_meas, "replay grid", best_zoh, "held", best_held)
+    assert abs(best_meas) <= 0.5
+    assert best_held >= 5.0
+    assert best_zoh <= -1.5      # the replay grid's input hold (half a period), seen as a delay
+
+
+def test_at_measured_times_matches_replay_rows_when_aligned(short_campaign):
+    """Queried exactly at grid rows, the evaluation returns the rows' values."""
+    result, paths, runs = short_campaign
+    res, _ = replay_at_measured_times(load_model(paths["truth_model"]), runs)
+    run, sl = next(res.campaign.slices())
+    vals = interpolate_on_grid(run.t, res.torque_sim[sl], run.t)
+    np.testing.assert_allclose(vals, res.torque_sim[sl])
+    cmp = at_measured_times(res.campaign, res.torque_sim)
+    assert cmp.t.size == sum(r.torque_measured_t.size for r in res.campaign.runs)
+
+
+def test_measured_time_grid_rows_and_batch(short_campaign):
+    from clutch_model.diagnosis.measured_time import measured_time_grid
+    from clutch_model.plant.simulate import simulate_batch
+    result, paths, runs = short_campaign
+    g = measured_time_grid(runs, rate_hz=500.0)
+    ok = g.torque_rows >= 0
+    assert ok.mean() > 0.97                       # only samples before a run's first row miss
+    np.testing.assert_array_equal(g.t[g.torque_rows[ok]], g.torque_t[ok])
+    assert np.all(g.run_index[g.torque_rows[ok]] == g.torque_run[ok])
+    # inputs: between the two samples around each row, at the linear weight of its time
+    run0 = runs[0]
+    tf, vf = run0.samples["applied_force"]
+    rows0 = g.run_index == 0
+    tg, fg = g.t[rows0], g.force[rows0]
+    k = np.searchsorted(tf, tg, side="right") - 1
+    inside = (k >= 0) & (k < tf.size - 1)
+    k = k[inside]
+    w = (tg[inside] - tf[k]) / (tf[k + 1] - tf[k])
+    assert np.all((w >= 0) & (w <= 1))
+    np.testing.assert_allclose(fg[inside], (1 - w) * vf[k] + w * vf[k + 1], rtol=1e-9, atol=1e-9)
+    model = load_model(paths["truth_model"])
+    one = simulate_at_measured_times(model, runs, grid=g)
+    batch = simulate_batch([model, model], g.t, g.force, g.slip, g.sump, run_start=g.run_start)
+    np.testing.assert_allclose(batch.torque_nm[1], one.sim.torque_nm, rtol=1e-9, atol=1e-9)
+    picked = g.at_torque_stamps(batch.torque_nm)
+    assert picked.shape == (2, g.torque_t.size)
+    np.testing.assert_allclose(picked[0][ok], one.comparison.model[ok])
+
+
+def test_without_locked_torque(short_campaign):
+    from clutch_model.diagnosis.lockup import without_locked_torque
+    from clutch_model.formats.bag_reader import Campaign
+    result, paths, runs = short_campaign
+    camp, locks = without_locked_torque(Campaign(runs), pad_s=0.1)
+    for run, new, lk in zip(Campaign(runs).runs, camp.runs, locks):
+        side = sidecar(paths, run.name)
+        gone = ~np.isfinite(new.torque_measured_nm) & np.isfinite(run.torque_measured_nm)
+        np.testing.assert_array_equal(gone, lk.at(run.t, 0.1) & np.isfinite(run.torque_measured_nm))
+        kept = np.isfinite(new.torque_measured_nm)
+        np.testing.assert_array_equal(new.torque_measured_nm[kept], run.torque_measured_nm[kept])
+        # every truly locked row is out (the grid's torque is the latest sample: pad covers it)
+        fine_locked = np.interp(run.t, side["fine_t_s"], side["fine_locked"].astype(float)) > 0
+        assert not np.any(kept & fine_locked)
+
+
+def test_measured_time_campaign(short_campaign):
+    from clutch_model.diagnosis.measured_time import measured_time_campaign
+    from clutch_model.replay import replay_runs
+    result, paths, runs = short_campaign
+    camp = measured_time_campaign(runs)
+    model = load_model(paths["truth_model"])
+    rep = replay_runs(model, camp)
+    mts = simulate_at_measured_times(model, runs, rate_hz=1000.0)
+    replay_rows = np.zeros(camp.t.size, bool)
+    for run, (new, sl) in zip(runs, camp.slices()):
+        ok = np.isfinite(new.torque_measured_nm)
+        # measured samples sit at their own stamps, nothing else is measured; the grid starts
+        # at the first force and slip sample, the replay grid's first row or before it
+        assert new.t[0] <= run.t[0]
+        np.testing.assert_array_equal(new.t[ok], run.torque_measured_t[run.torque_measured_t >= new.t[0]])
+        replay_rows[sl] = new.t >= run.t[0]
+    # the grid-based replay on it agrees with the 1 kHz measured-time simulation at the stamps
+    # (which starts at the replay grid's first row; the film's start differs over a few rows)
+    ok = np.isfinite(camp.torque_measured) & replay_rows
+    a = rep.torque_sim[ok]
+    b = mts.comparison.model[mts.comparison.valid]
+    lock = np.concatenate([detect_lockup_run(r).at(r.torque_measured_t[r.torque_measured_t >= r.t[0]], 0.1)
+                           for r in runs])
+    assert a.size == b.size
+    assert np.sqrt(np.mean((a - b)[~lock] ** 2)) < 3.0
+
+
+def test_lock_detection_with_slip_sign_changes(tmp_path_factory):
+    """Slip crossing 0 while slipping is not a lock; locked torque keeps the last slip's sign."""
+    res, paths, runs = make_campaign(tmp_path_factory, "signs", seed=33, schedule="few-long",
+                                     run_duration_s=40.0, slip_sign_changes=True)
+    crossings = 0
+    for run in runs:
+        side = sidecar(paths, run.name)
+        w = side["fine_slip_speed_rad_s"]
+        crossings += int(np.sum((w[1:] * w[:-1] < 0)))
+        lk = side["fine_locked"]
+        # while locked the driveline torque has the sign of the slip before the lock
+        starts = np.flatnonzero(np.diff(lk.astype(int)) == 1) + 1
+        for s0 in starts:
+            before = w[:s0][np.abs(w[:s0]) > 1e-3][-1]
+            assert np.sign(side["fine_torque_nm"][s0]) == np.sign(before)
+    assert crossings >= 2
+    prec, rec, n = precision_recall(paths, runs)
+    assert prec >= 0.85 and rec >= 0.95, (prec, rec)
+
+
+def test_plant_starts_where_force_and_slip_start(tmp_path):
+    """A sump temperature logged at 2 Hz starts 0.45 s after the force and slip: the replay grid
+    starts there, with the film at rest although 400 N have squeezed it since the start. The
+    diagnosis's grid starts at the first instant with a force and a slip sample (the sump's first
+    sample held back), so the model follows the true torque from there; independent truth: the
+    plant simulated from the log's start on a fine grid with the noise-free inputs."""
+    from clutch_model.diagnosis.measured_time import measured_time_campaign, plant_inputs_start_s
+    from clutch_model.formats.bag_reader import read_bag
+    from clutch_model.formats.bag_writer import write_run_bag
+    from clutch_model.replay import replay_runs
+    model = load_model(None)
+    fine = np.arange(0.0, 2.5, 1e-4)
+    force = lambda t: np.where(t < 1.2, 400.0, 400.0 + 3000.0 * np.minimum((t - 1.2) / 0.3, 1.0))
+    slip = lambda t: 8.0 + 2.0 * np.sin(2 * np.pi * 0.5 * t)
+    truth = simulate(model, fine, force(fine), slip(fine), 60.0).torque_nm
+    tf, tw = np.arange(0.002, 2.45, 0.002), np.arange(0.004, 2.45, 0.005)
+    tq, ts = np.arange(0.0035, 2.45, 0.005), np.arange(0.45, 2.45, 0.5)
+    write_run_bag(tmp_path / "b", {"applied_force": (tf, force(tf)), "slip_speed": (tw, slip(tw)),
+                                   "sump_temperature": (ts, np.full(ts.size, 60.0)),
+                                   "measured_torque": (tq, np.interp(tq, fine, truth))})
+    run = read_bag(tmp_path / "b")
+    t_bag = run.samples["applied_force"][0][0] - 0.002           # the bag's time base
+    assert run.t[0] - t_bag >= 0.45 - 1e-9                       # the replay grid waits for the sump
+    camp = measured_time_campaign([run])
+    assert abs(camp.t[0] - plant_inputs_start_s(run)) < 1e-12
+    assert abs(camp.t[0] - t_bag - 0.004) < 1e-6                 # the first slip sample
+    resid = camp.torque_measured - replay_runs(model, camp).torque_sim
+    ok = np.isfinite(resid)
+    assert np.count_nonzero(ok & (camp.t < run.t[0])) >= 85       # the torque before the sump is compared
+    late = replay_runs(model, [run])                              # from the replay grid's first row
+    tt = run.torque_measured_t
+    at = (tt >= run.t[0]) & (tt < run.t[0] + 0.75)
+    err_late = np.interp(tt[at], run.t, late.torque_sim) - run.torque_measured_raw_nm[at]
+    early = ok & (camp.t >= run.t[0]) & (camp.t < run.t[0] + 0.75)
+    rms_late, rms_early = np.sqrt(np.mean(err_late ** 2)), np.sqrt(np.mean(resid[early] ** 2))
+    scale = np.sqrt(np.mean(truth[(fine > 0.45) & (fine < 1.2)] ** 2))
+    assert rms_late > 0.05 * scale, (rms_late, scale)            # the missed squeeze shows
+    assert rms_early < 0.2 * rms_late, (rms_early, rms_late)
