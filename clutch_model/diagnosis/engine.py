@@ -329,7 +329,7 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
         say(plan.describe())
     timings["prepare (regrid, decimate)"] = time.perf_counter() - tick
     # the sump temperature smoothed, or as logged when the torque sides with it (sump_reading)
-    sump = choose_sump_reading(campaign, bench_model)
+    sump = choose_sump_reading(campaign, bench_model, noise_nm=input_noise.torque_noise_hf_nm)
     say(sump.describe())
     input_info = {**input_info, **sump.to_dict()}
     campaign = sump.apply(campaign)

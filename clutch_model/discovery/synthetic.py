@@ -16,7 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from clutch_model.diagnosis.engine import choose_held_out, smooth_sump
+from clutch_model.diagnosis.engine import choose_held_out
+from clutch_model.diagnosis.sump_reading import smooth_sump
 from clutch_model.diagnosis.fitting import fit_candidate
 from clutch_model.formats.bag_reader import Campaign, Run
 from clutch_model.identification.friction_fit import fit_friction

@@ -7,6 +7,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
+import pytest
 from scipy.signal import lfilter
 
 from clutch_model.diagnosis.sump_reading import choose_sump_reading, logged_sump, smooth_sump
@@ -103,3 +104,17 @@ def test_readings_that_agree_keep_the_smoothed_one():
     reading = choose_sump_reading(_with_torque(camp, measured), model)
     assert not reading.logged
     assert reading.difference_rms_nm < 0.1 and np.isnan(reading.beta)
+
+
+def test_a_difference_small_against_the_noise_is_not_weighed():
+    """Readings that differ by far less than the torque's noise near Nyquist: the weight would
+    follow whatever else the torque carries, and the smoothed reading is kept."""
+    model = load_model(None)
+    camp = _quantised_campaign()
+    truth = predict_campaign(model, logged_sump(camp), energy0_j=0.0).torque_nm
+    smooth = predict_campaign(model, smooth_sump(camp), energy0_j=0.0).torque_nm
+    diff = float(np.sqrt(np.mean((truth - smooth) ** 2)))
+    measured = truth + np.random.default_rng(2).normal(0, 2.0, truth.size)
+    reading = choose_sump_reading(_with_torque(camp, measured), model, noise_nm=10.0 * diff)
+    assert not reading.logged and np.isnan(reading.beta), reading.describe()
+    assert reading.least_nm == pytest.approx(3.0 * diff)
