@@ -125,10 +125,11 @@ class InputTiming:
 
     def describe(self) -> str:
         what = "held between samples (as replay)" if self.held else "linear between samples"
+        band = (f"; a hysteresis band of {100 * self.hysteresis_band:.1f} % held apart"
+                if self.hysteresis_band else "")
         return (f"inputs read {what}: the measured torque sides with the held reading by weight "
                 f"{self.beta:.2f} over {self.rows} slipping rows (the readings differ by "
-                f"{self.difference_rms_nm:.2f} N*m rms" + (f"; a hysteresis band of {100 * self.hysteresis_band:.1f} % "
-                                                             f"held apart" if self.hysteresis_band else "") + ")")
+                f"{self.difference_rms_nm:.2f} N*m rms{band})")
 
     def to_dict(self) -> dict:
         return {"inputs_between_samples": "held" if self.held else "linear", "held_weight": self.beta,
@@ -158,6 +159,18 @@ class ReadingComparison:
     rms: float               # rms of d
 
 
+def campaign_head(campaign, max_rows: int = MAX_ROWS, keep=None):
+    """The first ``max_rows`` rows of the campaign, shared by its runs from their starts (runs
+    with a measured torque, and ``keep(run)`` when given), or None when no run is left."""
+    from clutch_model.diagnosis.input_hold import run_rows
+    from clutch_model.formats.bag_reader import Campaign
+
+    per_run = max(max_rows // max(len(campaign.runs), 1), 2)
+    runs = [run_rows(r, slice(0, per_run)) for r in campaign.runs if r.torque_measured_nm is not None]
+    runs = [r for r in runs if keep is None or keep(r)]
+    return Campaign(runs) if runs else None
+
+
 def compare_readings(model, first, second, min_slip_rad_s: float = MIN_SLIP_RAD_S) -> ReadingComparison:
     """``model`` simulated on two readings of the same rows (campaigns ``first`` and
     ``second``), compared on the rows where the clutch slips (|slip| > ``min_slip_rad_s``:
@@ -180,17 +193,12 @@ def choose_input_timing(linear, model, max_rows: int = MAX_ROWS) -> InputTiming:
     campaign, its runs' own samples kept) and on the same rows read held, up to ``max_rows``
     rows from the runs' starts; the torque regressed on the difference of the two
     predictions. Only the chosen campaign is ever built whole (``with_held_inputs``)."""
-    from clutch_model.diagnosis.input_hold import run_rows
-    from clutch_model.formats.bag_reader import Campaign
     from clutch_model.plant.mechanisms import make_mechanism
     from clutch_model.prediction import predict_campaign
 
-    per_run = max(max_rows // max(len(linear.runs), 1), 2)
-    runs = [run_rows(r, slice(0, per_run)) for r in linear.runs if r.torque_measured_nm is not None]
-    runs = [r for r in runs if _held_run_inputs(r, r.t) is not None]
-    if not runs:
+    head = campaign_head(linear, max_rows, keep=lambda r: _held_run_inputs(r, r.t) is not None)
+    if head is None:
         return InputTiming(held=False, beta=float("nan"), rows=0, difference_rms_nm=0.0)
-    head = Campaign(runs)
     cmp = compare_readings(model, head, with_held_inputs(head))
     p_lin, y, ok, d, n, rms = cmp.p_first, cmp.y, cmp.ok, cmp.d, cmp.n, cmp.rms
     if n < 10 or not rms > 0:

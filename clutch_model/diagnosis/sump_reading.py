@@ -36,9 +36,11 @@ below MIN_DIFFERENCE_NOISE of the torque's noise near Nyquist) the weight says n
 smoothed reading is kept, as it was before the choice: over 45 outside campaigns the weight was
 0.67-1.17 wherever d reached 0.3 of that noise, and anywhere from -22 to 222 below it; on the
 virtual car (the clutch against the true sump) a friction that follows the slip's acceleration
-took it to 3.0 at d = 0.85 N*m under 8 N*m of noise, and the logged reading lost that effect. A warm clutch is not such a case: half a degree moves the friction level
-by ~0.25 % (1-2 N*m at 600 N*m), and the weight is read as at cold. Replay is not changed; report.json's ``inputs`` gives the figures
-and the decision (``sump_reading``, ``sump_logged_weight``).
+took it to 3.0 at d = 0.85 N*m under 8 N*m of noise, and the logged reading lost that effect.
+A warm clutch is not such a case: half a degree moves the friction level by ~0.25 % (1-2 N*m at
+600 N*m), and the weight is read as at cold. Replay is not changed; report.json's ``inputs``
+gives the figures and the decision (``sump_reading``, ``sump_logged_weight``,
+``sump_difference_rms_nm``).
 """
 from __future__ import annotations
 
@@ -128,15 +130,11 @@ def choose_sump_reading(campaign, model, noise_nm: float = 0.0, max_rows: int = 
     by the runs from their starts), the torque regressed on the difference when the two differ
     by MIN_DIFFERENCE_NM and MIN_DIFFERENCE_NOISE times ``noise_nm`` (the measured torque's
     noise near Nyquist) at least."""
-    from clutch_model.diagnosis.input_hold import run_rows
-    from clutch_model.diagnosis.input_timing import compare_readings
-    from clutch_model.formats.bag_reader import Campaign
+    from clutch_model.diagnosis.input_timing import campaign_head, compare_readings
 
-    per_run = max(max_rows // max(len(campaign.runs), 1), 2)
-    runs = [run_rows(r, slice(0, per_run)) for r in campaign.runs if r.torque_measured_nm is not None]
-    if not runs:
+    head = campaign_head(campaign, max_rows)
+    if head is None:
         return SumpReading(logged=False, beta=float("nan"), rows=0, difference_rms_nm=0.0)
-    head = Campaign(runs)
     cmp = compare_readings(model, smooth_sump(head), logged_sump(head), MIN_SLIP_RAD_S)
     p_smooth, y, ok, d, n, rms = cmp.p_first, cmp.y, cmp.ok, cmp.d, cmp.n, cmp.rms
     least = max(MIN_DIFFERENCE_NM, MIN_DIFFERENCE_NOISE * (noise_nm if math.isfinite(noise_nm) else 0.0))
