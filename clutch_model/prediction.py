@@ -16,13 +16,44 @@ What it predicts for:
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
 from clutch_model.plant.mechanisms import apply_measurement
 from clutch_model.plant.params import ClutchModel
 from clutch_model.plant.simulate import SimResult, simulate, simulate_batch
+
+
+@dataclass(frozen=True)
+class PlantGrid:
+    """A run's plant inputs on a grid finer than its rows: the plant is simulated on ``t`` and
+    read at ``rows`` (the index in ``t`` of each of the run's rows; the grid may start before
+    the first row, with the inputs: the plant restarts at ``t[0]``). The
+    diagnosis compares where a sparse torque was measured (diagnosis.measured_time): its rows
+    sit at the torque's stamps, 10-20 ms apart at 50-100 Hz, and a force stepping within such
+    a step reaches the plant only through its own samples. The sump temperature, slow, is read
+    from the run's rows (linearly between them)."""
+
+    t: np.ndarray
+    force: np.ndarray
+    slip: np.ndarray
+    rows: np.ndarray
+
+    def window(self, a: int, b: int) -> "PlantGrid":
+        """The grid of the run's rows a..b-1 (a window of the run; from the run's start with
+        its first row)."""
+        lo, hi = (0 if a == 0 else int(self.rows[a])), int(self.rows[b - 1]) + 1
+        return PlantGrid(self.t[lo:hi], self.force[lo:hi], self.slip[lo:hi], self.rows[a:b] - lo)
+
+
+def _grid_of(run):
+    """(t, force, slip, sump, rows) of a run on its plant grid, or None (the rows themselves)."""
+    g = getattr(run, "plant_grid", None)
+    if g is None:
+        return None
+    sump = np.interp(g.t, np.asarray(run.t, float), np.asarray(run.sump_temperature_c, float))
+    return g.t, g.force, g.slip, sump, g.rows
 
 
 @dataclass(frozen=True)
@@ -39,6 +70,9 @@ class PlantInputs:
     # start_index[k] = j >= 0 on such a run's first row, start_states[j] its state; else None
     start_index: np.ndarray | None = None
     start_states: np.ndarray | None = None
+    # runs on a plant grid finer than their rows (PlantGrid): the index in the grid of each of
+    # the campaign's rows, where predictions are read; None: the grid is the rows
+    pick: np.ndarray | None = None
 
     @classmethod
     def of(cls, campaign) -> "PlantInputs":
@@ -47,6 +81,8 @@ class PlantInputs:
         if isinstance(campaign, PlantInputs):
             return campaign
         runs = getattr(campaign, "runs", None)
+        if runs and any(getattr(r, "plant_grid", None) is not None for r in runs):
+            return cls._on_plant_grids(runs)
         start = int(runs[0].start_time_ns) if runs else None
         index, states = None, None
         if runs and any(getattr(r, "plant_state0", None) is not None for r in runs):
@@ -63,6 +99,39 @@ class PlantInputs:
                    run_start=np.ascontiguousarray(campaign.run_start, bool), first_start_time_ns=start,
                    start_index=index, start_states=states)
 
+    @classmethod
+    def _on_plant_grids(cls, runs) -> "PlantInputs":
+        """Runs concatenated on their plant grids (a run without one on its rows), ``pick``
+        the campaign's rows in them."""
+        parts, picks, index, states = [], [], [], []
+        off = 0
+        for r in runs:
+            part = _grid_of(r)
+            if part is None:
+                part = (r.t, r.applied_force_n, r.slip_speed_rad_s, r.sump_temperature_c, np.arange(len(r)))
+            part = tuple(np.asarray(x, float) for x in part[:4]) + (np.asarray(part[4], np.int64),)
+            parts.append(part)
+            picks.append(part[4] + off)
+            if getattr(r, "plant_state0", None) is not None:
+                index.append(off)
+                states.append(np.asarray(r.plant_state0, float))
+            off += part[0].size
+        run_start = np.zeros(off, bool)
+        run_start[np.cumsum([0] + [p[0].size for p in parts[:-1]])] = True
+        start_index = start_states = None
+        if states:
+            start_index = np.full(off, -1, dtype=np.int64)
+            start_index[index] = np.arange(len(states))
+            start_states = np.ascontiguousarray(np.stack(states))
+        cat = (lambda k: np.ascontiguousarray(np.concatenate([p[k] for p in parts])))
+        return cls(t=cat(0), force=cat(1), slip=cat(2), sump=cat(3), run_start=run_start,
+                   first_start_time_ns=int(runs[0].start_time_ns), start_index=start_index,
+                   start_states=start_states, pick=np.concatenate(picks))
+
+    def at_rows(self, values):
+        """A signal on the simulation grid (1-D, or (n_sets, n)) read at the campaign's rows."""
+        return values if self.pick is None else np.asarray(values)[..., self.pick]
+
     @property
     def start(self) -> dict:
         """The given start states as keyword arguments of simulate / simulate_batch."""
@@ -72,7 +141,8 @@ class PlantInputs:
 
     @property
     def n_rows(self) -> int:
-        return int(self.t.size)
+        """Rows of the campaign (what predictions give; the simulation grid may be finer)."""
+        return int(self.t.size if self.pick is None else self.pick.size)
 
 
 @dataclass(frozen=True)
@@ -93,13 +163,30 @@ def initial_energy(model: ClutchModel, inputs: PlantInputs) -> float:
     return model.initial_energy_j(inputs.first_start_time_ns)
 
 
-def predict_campaign(model_or_rows, campaign, energy0_j: float | None = None, measurement=None) -> Prediction:
+def _sim_at(sim: SimResult, pick) -> SimResult:
+    return replace(sim, **{f.name: getattr(sim, f.name)[pick] for f in fields(sim)})
+
+
+def predict_campaign(model_or_rows, campaign, energy0_j: float | None = None, measurement=None,
+                     on_grid: bool = False) -> Prediction:
     """Predicted measured torque of a model (or models, or parameter rows) on a campaign.
 
     ``energy0_j``: dissipated energy at the first row; default: what a single model's campaign
     history knows at the first run's start, 0 for batches. ``measurement``: measurement
-    mechanisms for parameter rows (models carry their own)."""
+    mechanisms for parameter rows (models carry their own). Runs on a plant grid finer than
+    their rows (PlantGrid) are simulated on it, the measurement mechanisms applied there, and
+    every signal read at the rows (``on_grid``: left on the grid, ``PlantInputs.at_rows``)."""
     inputs = PlantInputs.of(campaign)
+    pred = _predict_on_grid(model_or_rows, inputs, energy0_j, measurement)
+    if inputs.pick is None or on_grid:
+        return pred
+    pick = inputs.pick
+    return Prediction(torque_nm=pred.torque_nm[..., pick], plant_torque_nm=pred.plant_torque_nm[..., pick],
+                      pack_temperature_c=pred.pack_temperature_c[..., pick], energy0_j=pred.energy0_j,
+                      sim=None if pred.sim is None else _sim_at(pred.sim, pick))
+
+
+def _predict_on_grid(model_or_rows, inputs: PlantInputs, energy0_j, measurement) -> Prediction:
     args = (inputs.t, inputs.force, inputs.slip, inputs.sump)
     if isinstance(model_or_rows, ClutchModel):
         model = model_or_rows

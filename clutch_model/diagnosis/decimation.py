@@ -207,7 +207,7 @@ def _sample(campaign, measured_time: bool, sample_s: float):
         t = r.t[rows]
         rows = rows[t <= t[0] + max(per_run, 10.0)]
         pick = lambda a: None if a is None else np.asarray(a)[rows]      # noqa: E731
-        runs.append(replace(r, t=r.t[rows], applied_force_n=pick(r.applied_force_n),
+        runs.append(replace(r, t=r.t[rows], plant_grid=None, applied_force_n=pick(r.applied_force_n),
                             slip_speed_rad_s=pick(r.slip_speed_rad_s), sump_temperature_c=pick(r.sump_temperature_c),
                             torque_measured_nm=pick(r.torque_measured_nm),
                             pack_temperature_measured_c=pick(r.pack_temperature_measured_c)))
@@ -297,7 +297,7 @@ def decimate_run(run, q: int, measured_time: bool = False):
         out["torque_measured_nm"] = tq_dec
     if run.pack_temperature_measured_c is not None:
         out["pack_temperature_measured_c"] = np.asarray(run.pack_temperature_measured_c, float)[rows][keep]
-    return replace(run, t=t[keep].copy(), **out)
+    return replace(run, t=t[keep].copy(), plant_grid=None, **out)
 
 
 def decimate_campaign(campaign, plan: DecimationPlan, measured_time: bool = False):

@@ -37,7 +37,8 @@ from clutch_model.plant.simulate import SimResult
 from clutch_model.diagnosis import features as F
 from clutch_model.diagnosis.candidates import CampaignContext, MechanismCandidate, baseline_fit
 from clutch_model.diagnosis.input_hold import decide_input_noise, with_midpoint_force, with_smoothed_slip
-from clutch_model.diagnosis.input_timing import choose_input_timing, with_held_inputs
+from clutch_model.diagnosis.input_timing import (choose_input_timing, force_sample_period_s, reading_unsettled,
+                                                 with_held_inputs)
 from clutch_model.diagnosis.lockup import without_locked_torque
 from clutch_model.diagnosis.run_level import within_run_forecast
 from clutch_model.diagnosis.force_dynamics import (named_or_constant_play, named_or_force_dynamics,
@@ -51,7 +52,7 @@ from clutch_model.diagnosis.static_friction import fit_static_friction, lock_ent
 from clutch_model.diagnosis.slip_acceleration import named_or_slip_acceleration, none_or_slip_acceleration
 from clutch_model.diagnosis.torque_line import none_or_torque_line
 from clutch_model.diagnosis.bench_anchor import named_and_bench_anchored, none_or_bench_anchored
-from clutch_model.diagnosis.fitting import CANDIDATE_IDS, CandidateFit, fit_candidate
+from clutch_model.diagnosis.fitting import CANDIDATE_IDS, CandidateFit, fit_candidate, time_mechanism_ids
 from clutch_model.diagnosis.friction_ridge import held_to_the_data
 from clutch_model.diagnosis.ridged_selection import selection_at_the_data_ridge
 from clutch_model.diagnosis.noise_model import DEFAULT_MAX_ORDER, fit_noise_model, white_floor
@@ -118,12 +119,13 @@ def choose_held_out(names: list, runs=None) -> list:
     return [names[k] for k in picks]
 
 
-def without_locked_rows(campaign: Campaign) -> tuple:
+def without_locked_rows(campaign: Campaign, model_lock_slip_rad_s: float = 0.0) -> tuple:
     """The campaign with the measured torque NaN on locked rows (the driveline, not the
     clutch's capacity, sets it there) -> (campaign, locked mask, LockupResult per run): lock
-    phases found from the data (diagnosis.lockup), padded ``LOCK_PAD_S`` on both sides."""
+    phases found from the data (diagnosis.lockup), padded ``LOCK_PAD_S`` on both sides, and the
+    rows inside the model's own lock band (``model_lock_slip_rad_s``)."""
     before = np.isfinite(campaign.torque_measured)
-    campaign, results = without_locked_torque(campaign, pad_s=LOCK_PAD_S)
+    campaign, results = without_locked_torque(campaign, pad_s=LOCK_PAD_S, model_lock_slip_rad_s=model_lock_slip_rad_s)
     locked = before & ~np.isfinite(campaign.torque_measured)
     return campaign, locked, results
 
@@ -305,6 +307,7 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
     input_info = input_noise.to_dict()
     if input_noise.smoothed:
         campaign = with_smoothed_slip(campaign, input_noise.sigma_s)
+    input_info["force_sample_period_s"] = force_sample_period_s(campaign)
     if measured_time is None:
         measured_time = topics_unaligned(campaign.runs)
     if measured_time:
@@ -335,7 +338,7 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
     campaign = sump.apply(campaign)
     # lock-up phases (found from the data, diagnosis.lockup): the driveline sets the torque
     torque_by_run = [r.torque_measured_nm for r in campaign.runs]
-    campaign, locked, lock_results = without_locked_rows(campaign)
+    campaign, locked, lock_results = without_locked_rows(campaign, nominal.lock_slip_rad_s)
     entry_rows = lock_entry_rows(campaign, lock_results)      # while the runs keep their slip samples
     # each topic's raw samples served the regridding and the lock-up detection; nothing after
     # reads them (an hour at 1 kHz: ~0.5 GB)
@@ -737,7 +740,10 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
         timings["discovery"] = time.perf_counter() - t0
     elif discover and sel.verdict == "named":
         t0 = time.perf_counter()
-        sel, discovery = _catalog_or_beyond(data, base, campaign, bench_model, sel, cands, say, whole_bag)
+        unsettled = reading_unsettled(inputs)
+        half_period = 0.5 * inputs.get("force_sample_period_s", math.nan) if unsettled else 0.0
+        sel, discovery = _catalog_or_beyond(data, base, campaign, bench_model, sel, cands, say, whole_bag,
+                                            half_force_period_s=half_period)
         timings["discovery"] = time.perf_counter() - t0
 
     # an extension found beyond the catalog where the catalog named nothing: the force paths
@@ -1315,8 +1321,28 @@ def _degradation_or_fade(data: SelectionData, base, campaign: Campaign, bench_mo
     return unexplained, DiscoveryOutcome(dsel, False)
 
 
+FORCE_RATE_TERM = "mu:force_rate"
+
+
+def force_timing_shift_s(parameters: dict, data: SelectionData, campaign: Campaign) -> float | None:
+    """The force timing a discovered extension amounts to, s (> 0: the force read later), when
+    its only term is the friction's force-rate term (mu_f x (1 + c dF/dt), dF/dt in kN/s): to
+    first order the torque of the force F read dt later moves by -T (dF/dt) dt / F, so
+    dt = -c F (F in kN, the fitted rows' median force where it is applied; on the plant under a
+    sine force the term that matches a 0.2 ms later reading gives 0.15 ms, the torque rising
+    slower than the force). None for any other extension."""
+    if set(parameters) != {FORCE_RATE_TERM}:
+        return None
+    f = np.asarray(campaign.force, float)[np.asarray(data.train_mask, bool)]
+    f = f[np.isfinite(f) & (f > 0.0)]
+    if not f.size:
+        return None
+    return -float(parameters[FORCE_RATE_TERM]) * 1e-3 * float(np.median(f))
+
+
 def _catalog_or_beyond(data: SelectionData, base, campaign: Campaign, bench_model: ClutchModel,
-                       sel: Selection, cands: list, say, whole_bag_held_out: bool = True) -> tuple:
+                       sel: Selection, cands: list, say, whole_bag_held_out: bool = True,
+                       half_force_period_s: float = 0.0) -> tuple:
     """Named catalog causes against terms beyond the catalog. Discovery is run on top of the
     named causes (judged by the same selection: it must predict the held-out residual, beat
     its friction-only twin and leave noise). When it finds nothing there, the catalog causes
@@ -1333,7 +1359,18 @@ def _catalog_or_beyond(data: SelectionData, base, campaign: Campaign, bench_mode
     of it, the slow misfit it left was forecast by the AR(20) noise model, and a torque offset
     of 5.4 N*m [0.5, 10.2] was named at t = 4.4 (plain held-out gain 1.3 %). On top of the
     offset, discovery found the fade (k = 0.045, tau 0.96 s) and a torque x slip-sign term of
-    -3.9 N*m, most of the offset taken back (t = 16.5)."""
+    -3.9 N*m, most of the offset taken back (t = 16.5).
+
+    ``half_force_period_s`` (> 0 when the data left open how the inputs are read between their
+    samples, ``input_timing.reading_unsettled``: a named delay or lag makes the held reading's
+    half force period indistinguishable from it): a force-rate term on top of a named time
+    mechanism that amounts to reading the force later by no more than that
+    (``force_timing_shift_s``; the held reading is the later one) is the reading, not a
+    phenomenon, and is not named. Measured on an outside generator's
+    pair (torque_sensor_lag 8.5 ms + drag_torque under a log whose inputs hold between
+    samples, force at 400 Hz, read linearly at weight 7.5): the lag came out 9.7 ms (half the
+    force period late) and on top of both a force-rate term of -2.4e-5 per kN/s, 0.15 ms of
+    force timing, was named as a third cause at t = 7.9."""
     named = sel.cause_ids
     say(f"{', '.join(named)} named: do terms beyond the catalog hold on top of them?")
     top = _judge_checkable(data, sel.final, campaign, bench_model, say, whole_bag_held_out)
@@ -1341,6 +1378,13 @@ def _catalog_or_beyond(data: SelectionData, base, campaign: Campaign, bench_mode
     if (found is None or not found.parameters or spans_cannot_check(found.parameters, whole_bag_held_out)
             or energy_not_within_runs(data, sel.final, found.fitted, found.parameters)):
         say("nothing beyond the catalog holds on top of the named causes")
+        return sel, None
+    shift = force_timing_shift_s(found.parameters, data, campaign)
+    if (shift is not None and half_force_period_s > 0.0 and time_mechanism_ids(named)
+            and 0.0 < shift <= half_force_period_s):
+        say(f"beyond the catalog on top of {', '.join(named)}: a force-rate term, {1e3 * shift:.3g} ms of force "
+            f"timing, within half the force's sample period ({1e3 * half_force_period_s:.3g} ms): how the inputs "
+            f"are read between samples, which the data leave open beside a delay or lag; not named")
         return sel, None
     terms = ", ".join(found.parameters)
     say(f"beyond the catalog on top of {', '.join(named)}: {terms} (held-out t = {found.comparison.t_stat:.1f}); "

@@ -158,9 +158,11 @@ class ReadingObjective(ForcePathObjective):
         for k, x in enumerate(xs):
             groups.setdefault(tuple(float(v) for v in x[self.n_mech:]), []).append(k)
         for rows in groups.values():
-            plant = predict_campaign([self.model_at(xs[rows[0]])], pi, energy0_j=0.0).torque_nm[0]
+            # the plant on its simulation grid (prediction.PlantGrid), read there and then at the rows
+            plant = predict_campaign([self.model_at(xs[rows[0]])], pi, energy0_j=0.0, on_grid=True).torque_nm[0]
             for k in rows:
-                out[k] = self.reading(plant, [s.from_x(v) for s, v in zip(self.specs, xs[k, :self.n_mech])])
+                out[k] = pi.at_rows(self.reading(plant, [s.from_x(v) for s, v in
+                                                         zip(self.specs, xs[k, :self.n_mech])]))
         return out
 
 
@@ -730,7 +732,7 @@ def _unless_rarely_binding(sel, before, found: dict, campaign, train, rate_n_per
     predicted the held-out residual at t = 3.7 (8.89 against 9.41 N*m): `unexplained`. A true
     23.5 kN/s limit holds the force off on about a tenth of the rows."""
     pi = PlantInputs.of(campaign)
-    off = np.abs(rate_limited_force(pi.t, pi.force, pi.run_start, rate_n_per_s) - pi.force)
+    off = pi.at_rows(np.abs(rate_limited_force(pi.t, pi.force, pi.run_start, rate_n_per_s) - pi.force))
     tol = _noise_band_n(_force_noise_n(before), FORCE_BAND_NOISE_FACTOR)
     rows = np.asarray(train, bool) & np.isfinite(off)
     frac = float(np.mean(off[rows] > tol)) if rows.any() else 0.0

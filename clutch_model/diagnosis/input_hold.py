@@ -168,9 +168,15 @@ GRID_FIELDS = ("t", "applied_force_n", "slip_speed_rad_s", "sump_temperature_c",
 
 def run_rows(run, keep):
     """The run (bag_reader.Run) on the grid rows ``keep`` (a mask or a slice) of every per-row
-    field; its own samples kept."""
-    return replace(run, **{f: (getattr(run, f)[keep] if getattr(run, f) is not None else None)
-                           for f in GRID_FIELDS})
+    field; its own samples kept, its plant grid (prediction.PlantGrid) cut to a slice's rows
+    (dropped for a mask)."""
+    grid = getattr(run, "plant_grid", None)
+    if grid is not None:
+        rows = np.arange(len(run))[keep]
+        contiguous = isinstance(keep, slice) and (keep.step in (None, 1)) and rows.size > 0
+        grid = grid.window(int(rows[0]), int(rows[-1]) + 1) if contiguous else None
+    return replace(run, plant_grid=grid, **{f: (getattr(run, f)[keep] if getattr(run, f) is not None else None)
+                                            for f in GRID_FIELDS})
 
 
 def model_input_noise(campaign, model, window_s: float = SENSITIVITY_WINDOW_S) -> tuple:

@@ -103,13 +103,20 @@ def with_held_inputs(campaign):
     force: the force and slip are read again from each run's own samples) read as replay
     reads its inputs: each row's force the mean over its step of the force
     samples held until the next one, the slip the latest sample at or before the row (the
-    sump temperature, slow, as it is). Runs without their own samples are kept."""
+    sump temperature, slow, as it is); a plant grid (``run_plant_grid``) read held as well.
+    Runs without their own samples are kept."""
     from clutch_model.formats.bag_reader import Campaign
+
+    from clutch_model.diagnosis.measured_time import run_plant_grid
 
     runs = []
     for run in campaign.runs:
         held = _held_run_inputs(run, np.asarray(run.t, float))
-        runs.append(run if held is None else replace(run, applied_force_n=held[0], slip_speed_rad_s=held[1]))
+        if held is not None:
+            run = replace(run, applied_force_n=held[0], slip_speed_rad_s=held[1])
+            if run.plant_grid is not None:
+                run = replace(run, plant_grid=run_plant_grid(run, held=True))
+        runs.append(run)
     return Campaign(runs)
 
 
@@ -157,6 +164,26 @@ class ReadingComparison:
     d: np.ndarray            # second - first prediction on those rows
     n: int
     rms: float               # rms of d
+
+
+def force_sample_period_s(campaign) -> float:
+    """The applied force's median sample interval (its own samples; the rows' when a run has
+    none), s."""
+    dts = []
+    for run in campaign.runs:
+        ts = run.samples.get("applied_force", (run.t,))[0]
+        if len(ts) > 2:
+            dts.append(float(np.median(np.diff(np.asarray(ts, float)))))
+    return float(np.median(dts)) if dts else float("nan")
+
+
+def reading_unsettled(inputs: dict) -> bool:
+    """Whether the inputs' reading between samples is left open by the data: read linearly
+    with a weight on the held reading above BETA_HELD_MAX (a delay or lag in the data, which the
+    held reading's half period of the force mimics)."""
+    beta = inputs.get("held_weight")
+    return (inputs.get("inputs_between_samples") == "linear" and beta is not None
+            and np.isfinite(beta) and beta > BETA_HELD_MAX)
 
 
 def campaign_head(campaign, max_rows: int = MAX_ROWS, keep=None):

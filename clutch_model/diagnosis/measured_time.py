@@ -258,6 +258,70 @@ def simulate_at_measured_times(model, runs, rate_hz: float = 1000.0, energy0_j=N
     return MeasuredTimeSimulation(grid=g, sim=sim, torque_pred=pred, comparison=g.comparison(pred))
 
 
+PLANT_GRID_DENSER = 1.5    # the force's samples at least this many times denser than the rows
+
+
+def _median_interval_s(t) -> float:
+    t = np.asarray(t, float)
+    return float(np.median(np.diff(t))) if t.size > 2 else float("nan")
+
+
+def plant_grid_needed(runs) -> bool:
+    """Whether the rows at the measured torque's stamps are too sparse for the plant: further
+    apart than the plant's own step (``kernels.MAX_STEP_S``, 5.1 ms: torque logged under ~196
+    Hz) while the force was logged PLANT_GRID_DENSER times denser. The plant holds a row's force
+    over its step; a force stepping within a 10 ms torque interval (a controller's request at 1
+    kHz) then reaches it late or not at all. Measured on an outside generator's campaign
+    (torque at 100 Hz, force at 1 kHz with 3-8 ms steps, an 8.3 ms transport delay): the true
+    model simulated on the torque's rows was 10-13 N*m off its own replay at the torque stamps
+    (noise 1.3 N*m); on the force's own samples 1.4."""
+    from clutch_model.plant import kernels as K
+
+    row, force = [], []
+    for run in runs:
+        tq = run.torque_measured_t
+        tf = run.samples.get("applied_force", (None,))[0]
+        if tq is None or tf is None or tq.size < 3 or tf.size < 3:
+            continue
+        row.append(_median_interval_s(tq))
+        force.append(_median_interval_s(tf))
+    if not row:
+        return False
+    row_s, force_s = float(np.median(row)), float(np.median(force))
+    return bool(row_s > K.MAX_STEP_S and force_s * PLANT_GRID_DENSER < row_s)
+
+
+def run_plant_grid(run, held: bool = False):
+    """The run's plant grid (prediction.PlantGrid): its rows joined with its force samples
+    between them, the force and slip read from their own samples there (``held``: the latest
+    sample at or before, as replay holds them; else linearly between samples), or None when
+    the run has not its own samples. The grid starts with the first instant with a force and a
+    slip sample (``plant_inputs_start_s``), before the first row when the torque began later.
+    Force stamps within 0.05 ms of a row are left out (no near-empty steps)."""
+    from clutch_model.prediction import PlantGrid
+
+    force, slip = run.samples.get("applied_force"), run.samples.get("slip_speed")
+    rows_t = np.asarray(run.t, float)
+    if force is None or slip is None or rows_t.size < 2:
+        return None
+    tf = np.asarray(force[0], float)
+    start = min(plant_inputs_start_s(run), float(rows_t[0]))
+    inside = tf[(tf >= start) & (tf < rows_t[-1])]
+    if inside.size:
+        pos = np.clip(np.searchsorted(rows_t, inside), 1, rows_t.size - 1)
+        near = np.minimum(np.abs(inside - rows_t[pos]), np.abs(inside - rows_t[pos - 1]))
+        inside = inside[near > 5e-5]
+    t = np.union1d(rows_t, inside)
+
+    def read(samples):
+        ts, vs = np.asarray(samples[0], float), np.asarray(samples[1], float)
+        if held:
+            return vs[np.clip(np.searchsorted(ts, t, side="right") - 1, 0, vs.size - 1)]
+        return np.interp(t, ts, vs)
+
+    return PlantGrid(t=t, force=read(force), slip=read(slip), rows=np.searchsorted(t, rows_t))
+
+
 def measured_time_campaign(runs, rate_hz: float | None = None):
     """The campaign re-gridded for comparing where the measurement is, in the replay-grid
     form every grid-based tool takes (bag_reader.Campaign): per run a grid at ``rate_hz``
@@ -267,12 +331,14 @@ def measured_time_campaign(runs, rate_hz: float | None = None):
     linearly interpolated between their own samples, ``torque_measured_nm`` the measured
     sample at its own stamp and NaN on every other row (so residuals exist only where the
     measurement is), pack temperature linearly interpolated. Names, start times and the raw
-    samples are kept."""
+    samples are kept. Rows too sparse for the plant (``plant_grid_needed``) get a plant grid
+    on the force's own samples (``run_plant_grid``, read linearly)."""
     from dataclasses import replace
 
     from clutch_model.formats.bag_reader import Campaign
 
     campaign = runs if isinstance(runs, Campaign) else Campaign(list(runs))
+    fine = plant_grid_needed(campaign.runs)
     out = []
     for run in campaign.runs:
         tf = run.samples["applied_force"][0]
@@ -290,9 +356,10 @@ def measured_time_campaign(runs, rate_hz: float | None = None):
         if "pack_temperature" in run.samples:
             tp, vp = run.samples["pack_temperature"]
             pack = np.interp(g, tp, vp, left=np.nan, right=np.nan)
-        out.append(replace(run, t=g, applied_force_n=vals["applied_force"], slip_speed_rad_s=vals["slip_speed"],
-                           sump_temperature_c=vals["sump_temperature"], torque_measured_nm=torque,
-                           pack_temperature_measured_c=pack))
+        row = replace(run, t=g, applied_force_n=vals["applied_force"], slip_speed_rad_s=vals["slip_speed"],
+                      sump_temperature_c=vals["sump_temperature"], torque_measured_nm=torque,
+                      pack_temperature_measured_c=pack, plant_grid=None)
+        out.append(replace(row, plant_grid=run_plant_grid(row)) if fine else row)
     return Campaign(out)
 
 

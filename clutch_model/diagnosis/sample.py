@@ -248,6 +248,7 @@ def sample_campaign(campaign: Campaign, windows: list, states: np.ndarray, warmu
             slip_speed_rad_s=r.slip_speed_rad_s[a:b], sump_temperature_c=r.sump_temperature_c[a:b],
             torque_measured_nm=tq, pack_temperature_measured_c=None if pk is None else pk[a:b],
             start_time_ns=int(r.start_time_ns) + int(round(float(t[0]) * 1e9)), samples={},
+            plant_grid=None if r.plant_grid is None else r.plant_grid.window(a, b),
             plant_state0=np.array(states[i], float), source=r.name, warmup_s=warmup_s))
         rows.append(np.arange(k0, k1))
     return Campaign(runs), np.concatenate(rows)

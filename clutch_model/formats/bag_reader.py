@@ -39,6 +39,10 @@ class Run:
     # slip_speed, sump_temperature, measured_torque, pack_temperature. The grid above holds
     # the latest sample at each force row; diagnosis compares where the measurement is.
     samples: dict = field(default_factory=dict)
+    # a grid finer than the rows that the plant is simulated on and read at the rows
+    # (prediction.PlantGrid: the diagnosis' rows at a sparse torque's stamps, the force's own
+    # samples between them); None: the plant steps from row to row
+    plant_grid: object = None
 
     @property
     def torque_measured_t(self) -> np.ndarray | None:

@@ -134,3 +134,38 @@ def test_a_hysteresis_in_a_held_log_does_not_take_the_weight():
     assert choice.held, choice
     assert abs(choice.beta - 1.0) < 0.3, choice
     assert 0.03 < choice.hysteresis_band < 0.07, choice
+
+
+def test_a_force_rate_term_is_read_as_the_force_timing():
+    """A discovered force-rate term c (per kN/s) moves the torque as the force read -c F later
+    would (first order, F in kN): checked against the plant itself, the torque of a ramping force
+    read 0.2 ms late against the force-rate term that matches it; only that term, only when the
+    data left the inputs' reading open (linear, weight on the held reading above the bar)."""
+    from types import SimpleNamespace
+
+    from clutch_model.diagnosis.engine import force_timing_shift_s
+    from clutch_model.diagnosis.input_timing import BETA_HELD_MAX, reading_unsettled
+    from clutch_model.plant.params import load_model
+    from clutch_model.plant.simulate import simulate
+
+    model = load_model(None)
+    t = np.arange(0.0, 2.0, 0.001)
+    force = 6000.0 + 2000.0 * np.sin(2 * np.pi * 1.5 * t)
+    rate_kn_s = 1e-3 * np.gradient(force, t)
+    shift = 2e-4
+    base = simulate(model, t, force, 5.0, 60.0).torque_nm
+    late = simulate(model, t, np.interp(t - shift, t, force), 5.0, 60.0).torque_nm
+    ok = t > 0.5
+    # the term's coefficient that best matches the late reading: T (1 + c dF/dt) ~ T_late
+    x = (base * rate_kn_s)[ok]
+    c = float(np.dot(x, (late - base)[ok]) / np.dot(x, x))
+    data = SimpleNamespace(train_mask=ok)
+    camp = SimpleNamespace(force=force)
+    got = force_timing_shift_s({"mu:force_rate": c}, data, camp)
+    assert got == pytest.approx(shift, rel=0.3)                    # 0.15 ms: the torque rises slower than F
+    assert force_timing_shift_s({"mu:force_rate": -c}, data, camp) == pytest.approx(-got)   # read earlier
+    assert force_timing_shift_s({"mu:force_rate": c, "mu:energy": 1e-3}, data, camp) is None
+    assert reading_unsettled({"inputs_between_samples": "linear", "held_weight": BETA_HELD_MAX + 3})
+    assert not reading_unsettled({"inputs_between_samples": "linear", "held_weight": 0.1})
+    assert not reading_unsettled({"inputs_between_samples": "held", "held_weight": 1.0})
+    assert not reading_unsettled({})

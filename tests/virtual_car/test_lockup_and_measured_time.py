@@ -1,5 +1,6 @@
 """Lock-up found from noisy slip data; the model compared where the measurement is."""
 import csv
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -8,6 +9,7 @@ import pytest
 from clutch_model.diagnosis.lockup import detect_lockup, detect_lockup_run
 from clutch_model.diagnosis.measured_time import (at_measured_times, interpolate_on_grid,
                                                   replay_at_measured_times, simulate_at_measured_times)
+from clutch_model.formats.bag_reader import Campaign
 from clutch_model.plant import kernels as K
 from clutch_model.plant.params import load_model
 from clutch_model.plant.simulate import simulate
@@ -276,6 +278,34 @@ def test_without_locked_torque(short_campaign):
         assert not np.any(kept & fine_locked)
 
 
+def test_a_stick_shorter_than_a_lock_phase_is_left_out():
+    """A slip-controlled clutch sticks for 0.15 s between two slip directions (the slip logged
+    within 2e-4 rad/s of 0, the torque the driveline's): shorter than a lock phase's dwell, so
+    no lock phase is found and the zero crossing's window covers only its start, but
+    the model locks there and gives its static capacity. Those rows are left out by the model's
+    own lock band; the slipping rows around them are kept."""
+    from clutch_model.diagnosis.lockup import without_locked_torque
+    from clutch_model.formats.bag_reader import Run
+    rng = np.random.default_rng(3)
+    t = np.arange(0.0, 3.0, 0.0025)
+    stick = (t >= 1.5) & (t < 1.65)
+    slip = np.where(t < 1.5, -2.0 * (1.5 - t), np.where(stick, 0.0, 3.0 * (t - 1.65)))
+    slip = slip + np.where(stick, rng.uniform(0.0, 2e-4, t.size), rng.normal(0, 1e-3, t.size))
+    torque = np.where(stick, 120.0, np.sign(slip) * 300.0)
+    run = Run(name="r", t=t, applied_force_n=np.full(t.size, 3000.0), slip_speed_rad_s=slip,
+              sump_temperature_c=np.full(t.size, 60.0), torque_measured_nm=torque,
+              samples={"slip_speed": (t, slip)})
+    plain, res = without_locked_torque(Campaign([run]), pad_s=0.1)
+    assert not res[0].segments                                     # too short for a lock phase
+    assert np.isfinite(plain.runs[0].torque_measured_nm[stick]).mean() > 0.3
+    model = load_model(None)
+    camp, _ = without_locked_torque(Campaign([run]), pad_s=0.1, model_lock_slip_rad_s=model.lock_slip_rad_s)
+    kept = np.isfinite(camp.runs[0].torque_measured_nm)
+    assert not np.any(kept & stick)
+    away = np.abs(slip) > 0.05
+    assert np.all(kept[away] == np.isfinite(plain.runs[0].torque_measured_nm)[away])
+
+
 def test_measured_time_campaign(short_campaign):
     from clutch_model.diagnosis.measured_time import measured_time_campaign
     from clutch_model.replay import replay_runs
@@ -361,3 +391,46 @@ def test_plant_starts_where_force_and_slip_start(tmp_path):
     scale = np.sqrt(np.mean(truth[(fine > 0.45) & (fine < 1.2)] ** 2))
     assert rms_late > 0.05 * scale, (rms_late, scale)            # the missed squeeze shows
     assert rms_early < 0.2 * rms_late, (rms_early, rms_late)
+
+
+def test_a_sparse_torque_is_compared_on_the_force_own_samples(tmp_path):
+    """Torque logged at 100 Hz, the force requested at 1 kHz in 3-8 ms steps: rows at the
+    torque's stamps hold one force over each 10 ms step, and the plant misses what the force
+    did inside it. The rows get a plant grid on the force's own samples (prediction.PlantGrid),
+    read held as logged. Independent truth: the plant simulated on a 0.1 ms grid with the held
+    force, read at the torque stamps."""
+    from clutch_model.diagnosis.input_timing import with_held_inputs
+    from clutch_model.diagnosis.measured_time import measured_time_campaign, plant_grid_needed
+    from clutch_model.formats.bag_reader import read_bag
+    from clutch_model.formats.bag_writer import write_run_bag
+    from clutch_model.prediction import predict_campaign
+    model = load_model(None)
+    rng = np.random.default_rng(7)
+    edges = np.cumsum(rng.uniform(0.003, 0.008, 800))
+    levels = 4000.0 + 9000.0 * rng.random(edges.size)
+    tf = np.arange(0.0, 3.0, 0.001)
+    force_f = lambda t: levels[np.clip(np.searchsorted(edges, t, side="right"), 0, levels.size - 1)]
+    fine = np.arange(0.0, 3.0, 1e-4)
+    held = force_f(tf)[np.clip(np.searchsorted(tf, fine, side="right") - 1, 0, tf.size - 1)]
+    slip = lambda t: 6.0 + 2.0 * np.sin(2 * np.pi * 0.7 * t)
+    truth = simulate(model, fine, held, slip(fine), 60.0).torque_nm
+    tw, tq = np.arange(0.0, 3.0, 0.001), np.arange(0.0104, 2.99, 0.01)
+    ts = np.arange(0.0, 3.0, 0.1)
+    write_run_bag(tmp_path / "b", {"applied_force": (tf, force_f(tf)), "slip_speed": (tw, slip(tw)),
+                                   "sump_temperature": (ts, np.full(ts.size, 60.0)),
+                                   "measured_torque": (tq, np.interp(tq, fine, truth))})
+    run = read_bag(tmp_path / "b")
+    assert plant_grid_needed([run])
+    camp = with_held_inputs(measured_time_campaign([run], rate_hz=1.0))
+    assert camp.runs[0].plant_grid is not None
+    ok = np.isfinite(camp.torque_measured) & (camp.t > 0.2)
+    on_grid = predict_campaign(model, camp).torque_nm
+    rows_only = predict_campaign(model, Campaign([replace(r, plant_grid=None) for r in camp.runs])).torque_nm
+    # and on the rows of a window of the run (diagnosis.sample) the grid is cut with them
+    from clutch_model.diagnosis.input_hold import run_rows
+    head = run_rows(camp.runs[0], slice(0, 100))
+    np.testing.assert_allclose(predict_campaign(model, Campaign([head])).torque_nm, on_grid[:100], rtol=0, atol=1e-9)
+    err = lambda p: float(np.sqrt(np.mean((p - camp.torque_measured)[ok] ** 2)))   # noqa: E731
+    assert on_grid.shape == camp.t.shape
+    assert err(on_grid) < 0.3, err(on_grid)
+    assert err(rows_only) > 10 * err(on_grid), (err(rows_only), err(on_grid))
