@@ -32,7 +32,8 @@ from clutch_model.replay import replay_runs
 from clutch_model.formats.bag_reader import Campaign
 from clutch_model.plant.mechanisms import CATALOG
 from clutch_model.diagnosis.decimation import choose_diagnosis_rate, decimate_campaign
-from clutch_model.diagnosis.measured_time import measured_time_campaign, topics_unaligned
+from clutch_model.diagnosis.measured_time import (choose_plant_grid, measured_time_campaign, topics_unaligned,
+                                                  without_plant_grid)
 from clutch_model.plant.simulate import SimResult
 from clutch_model.diagnosis import features as F
 from clutch_model.diagnosis.candidates import CampaignContext, MechanismCandidate, baseline_fit
@@ -324,6 +325,13 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
         input_info = {**input_info, **timing.to_dict()}
         if timing.held:
             campaign = with_held_inputs(campaign)
+        # rows too sparse for the plant: its grid on the force's own samples, where it matters
+        grid = choose_plant_grid(campaign, bench_model, noise_nm=input_noise.torque_noise_hf_nm)
+        if grid.rows:
+            say(grid.describe())
+            input_info = {**input_info, **grid.to_dict()}
+        if not grid.used:
+            campaign = without_plant_grid(campaign)
     # fast logs: anti-aliased decimation to the rate the diagnosis needs (diagnosis.decimation)
     plan = None
     if diagnosis_rate_hz is None or diagnosis_rate_hz > 0:

@@ -258,7 +258,8 @@ def simulate_at_measured_times(model, runs, rate_hz: float = 1000.0, energy0_j=N
     return MeasuredTimeSimulation(grid=g, sim=sim, torque_pred=pred, comparison=g.comparison(pred))
 
 
-PLANT_GRID_DENSER = 1.5    # the force's samples at least this many times denser than the rows
+PLANT_GRID_DENSER = 1.5    # the force's samples at least this many times denser than the rows ...
+PLANT_GRID_FORCE_CONTENT = 2.0   # ... doing between the rows this many times its noise (force_between_rows)
 
 
 def _median_interval_s(t) -> float:
@@ -277,18 +278,37 @@ def plant_grid_needed(runs) -> bool:
     (noise 1.3 N*m); on the force's own samples 1.4."""
     from clutch_model.plant import kernels as K
 
-    row, force = [], []
+    row, force, content = [], [], []
     for run in runs:
         tq = run.torque_measured_t
-        tf = run.samples.get("applied_force", (None,))[0]
-        if tq is None or tf is None or tq.size < 3 or tf.size < 3:
+        samples = run.samples.get("applied_force")
+        if tq is None or samples is None or tq.size < 3 or samples[0].size < 3:
             continue
         row.append(_median_interval_s(tq))
-        force.append(_median_interval_s(tf))
+        force.append(_median_interval_s(samples[0]))
+        content.append(force_between_rows(tq, *samples))
     if not row:
         return False
     row_s, force_s = float(np.median(row)), float(np.median(force))
-    return bool(row_s > K.MAX_STEP_S and force_s * PLANT_GRID_DENSER < row_s)
+    return bool(row_s > K.MAX_STEP_S and force_s * PLANT_GRID_DENSER < row_s
+                and np.nanmax(content) > PLANT_GRID_FORCE_CONTENT)
+
+
+def force_between_rows(rows_t, sample_t, sample_force) -> float:
+    """How much the force does between rows at ``rows_t`` that a line through the rows misses:
+    the rms of its samples less the line through its values at the rows, in units of its own
+    noise (robust, from first differences: a step is one outlier among them, the noise is in
+    all). About 1-1.5 for a smooth force with white sensor noise; steps between the rows take
+    it far above."""
+    ts, vs = np.asarray(sample_t, float), np.asarray(sample_force, float)
+    inside = (ts >= rows_t[0]) & (ts <= rows_t[-1])
+    if inside.sum() < 3:
+        return float("nan")
+    line = np.interp(ts[inside], rows_t, np.interp(rows_t, ts, vs))
+    miss = float(np.sqrt(np.mean((vs[inside] - line) ** 2)))
+    dv = np.diff(vs)
+    noise = 1.4826 * float(np.median(np.abs(dv - np.median(dv)))) / np.sqrt(2.0)
+    return miss / max(noise, 1e-9 * max(float(np.max(np.abs(vs))), 1.0))
 
 
 def run_plant_grid(run, held: bool = False):
@@ -320,6 +340,75 @@ def run_plant_grid(run, held: bool = False):
         return np.interp(t, ts, vs)
 
     return PlantGrid(t=t, force=read(force), slip=read(slip), rows=np.searchsorted(t, rows_t))
+
+
+PLANT_GRID_MIN_NM = 0.1        # the plant grid is kept where it moves the prediction by this much ...
+PLANT_GRID_NOISE_FRAC = 0.3    # ... and by this fraction of the torque's noise near Nyquist
+
+
+@dataclass
+class PlantGridChoice:
+    """Whether the diagnosis simulates on the plant grids (``choose_plant_grid``)."""
+
+    used: bool
+    difference_rms_nm: float = 0.0   # rms of grid - rows prediction on the slipping rows compared
+    least_nm: float = 0.0
+    rows: int = 0
+
+    def describe(self) -> str:
+        if not self.rows:
+            return "plant grid: the rows are dense enough for the plant"
+        what = "simulated on the force's own samples" if self.used else "simulated on the rows alone"
+        return (f"plant grid: the rows at the torque's stamps are sparse; {what} (the two differ by "
+                f"{self.difference_rms_nm:.3g} N*m rms over {self.rows} slipping rows, against a bar of "
+                f"{self.least_nm:.3g})")
+
+    def to_dict(self) -> dict:
+        return {"plant_grid": self.used, "plant_grid_difference_rms_nm": self.difference_rms_nm}
+
+
+def choose_plant_grid(campaign, model, noise_nm: float = 0.0) -> PlantGridChoice:
+    """Keep the runs' plant grids (``run_plant_grid``) where they matter: ``model`` simulated on
+    the campaign's head with them and on the rows alone, kept when the two predictions differ
+    on the slipping rows by PLANT_GRID_MIN_NM and PLANT_GRID_NOISE_FRAC of ``noise_nm`` (the
+    measured torque's noise near Nyquist) at least (both started with the inputs, before the first
+    torque sample: only what the force did between the rows is weighed). A force that moves smoothly between the
+    torque's samples reaches the plant as well through the step's midpoint (input_hold), and
+    the grid then costs simulation time (four to ten times the rows) and changes nothing."""
+    import math
+
+    from clutch_model.diagnosis.input_timing import campaign_head, compare_readings
+
+    if not any(r.plant_grid is not None for r in campaign.runs):
+        return PlantGridChoice(used=False)
+    head = campaign_head(campaign)
+    if head is None:
+        return PlantGridChoice(used=False)
+    cmp = compare_readings(model, without_plant_grid(head, keep_start=True), head)
+    least = max(PLANT_GRID_MIN_NM, PLANT_GRID_NOISE_FRAC * (noise_nm if math.isfinite(noise_nm) else 0.0))
+    return PlantGridChoice(used=bool(cmp.n >= 10 and cmp.rms >= least), difference_rms_nm=cmp.rms,
+                           least_nm=least, rows=cmp.n)
+
+
+def without_plant_grid(campaign, keep_start: bool = False):
+    """The campaign simulated on its rows alone (every run's plant grid dropped; ``keep_start``:
+    the grid cut to the rows and its first point, so the plant still starts with the inputs,
+    before the first torque sample)."""
+    from dataclasses import replace
+
+    from clutch_model.formats.bag_reader import Campaign
+    from clutch_model.prediction import PlantGrid
+
+    def cut(r):
+        g = r.plant_grid
+        if g is None or not keep_start or g.rows[0] == 0:
+            return None
+        # the rows as the plant reads them without a grid (their own force and slip), after
+        # the grid's first point
+        return PlantGrid(np.r_[g.t[0], r.t], np.r_[g.force[0], r.applied_force_n],
+                         np.r_[g.slip[0], r.slip_speed_rad_s], np.arange(1, len(r) + 1))
+
+    return Campaign([replace(r, plant_grid=cut(r)) for r in campaign.runs])
 
 
 def measured_time_campaign(runs, rate_hz: float | None = None):

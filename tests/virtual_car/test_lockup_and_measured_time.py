@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from clutch_model.diagnosis.lockup import detect_lockup, detect_lockup_run
-from clutch_model.diagnosis.measured_time import (at_measured_times, interpolate_on_grid,
+from clutch_model.diagnosis.measured_time import (at_measured_times, choose_plant_grid, interpolate_on_grid,
                                                   replay_at_measured_times, simulate_at_measured_times)
 from clutch_model.formats.bag_reader import Campaign
 from clutch_model.plant import kernels as K
@@ -400,7 +400,7 @@ def test_a_sparse_torque_is_compared_on_the_force_own_samples(tmp_path):
     read held as logged. Independent truth: the plant simulated on a 0.1 ms grid with the held
     force, read at the torque stamps."""
     from clutch_model.diagnosis.input_timing import with_held_inputs
-    from clutch_model.diagnosis.measured_time import measured_time_campaign, plant_grid_needed
+    from clutch_model.diagnosis.measured_time import force_between_rows, measured_time_campaign, plant_grid_needed
     from clutch_model.formats.bag_reader import read_bag
     from clutch_model.formats.bag_writer import write_run_bag
     from clutch_model.prediction import predict_campaign
@@ -420,6 +420,7 @@ def test_a_sparse_torque_is_compared_on_the_force_own_samples(tmp_path):
                                    "sump_temperature": (ts, np.full(ts.size, 60.0)),
                                    "measured_torque": (tq, np.interp(tq, fine, truth))})
     run = read_bag(tmp_path / "b")
+    assert force_between_rows(run.torque_measured_t, *run.samples["applied_force"]) > 10.0
     assert plant_grid_needed([run])
     camp = with_held_inputs(measured_time_campaign([run], rate_hz=1.0))
     assert camp.runs[0].plant_grid is not None
@@ -434,3 +435,35 @@ def test_a_sparse_torque_is_compared_on_the_force_own_samples(tmp_path):
     assert on_grid.shape == camp.t.shape
     assert err(on_grid) < 0.3, err(on_grid)
     assert err(rows_only) > 10 * err(on_grid), (err(rows_only), err(on_grid))
+    # the diagnosis keeps the grid where it moves the prediction by 0.3 of the torque's noise
+    choice = choose_plant_grid(camp, model, noise_nm=2.0)
+    assert choice.used and choice.difference_rms_nm > 5.0, choice
+
+
+def test_the_plant_grid_is_dropped_where_the_force_moves_smoothly(tmp_path):
+    """The same sparse torque under a force that moves smoothly between its samples: the rows'
+    midpoint force reaches the plant as well as a grid would, and none is made."""
+    from clutch_model.diagnosis.input_hold import with_midpoint_force
+    from clutch_model.diagnosis.measured_time import (force_between_rows, measured_time_campaign,
+                                                      plant_grid_needed, run_plant_grid)
+    from clutch_model.formats.bag_reader import read_bag
+    from clutch_model.formats.bag_writer import write_run_bag
+    model = load_model(None)
+    force = lambda t: 7000.0 + 3000.0 * np.sin(2 * np.pi * 0.8 * t)      # noqa: E731
+    slip = lambda t: 6.0 + 2.0 * np.sin(2 * np.pi * 0.7 * t)             # noqa: E731
+    tf, tq, ts = np.arange(0.0, 3.0, 0.001), np.arange(0.0104, 2.99, 0.01), np.arange(0.0, 3.0, 0.1)
+    fine = np.arange(0.0, 3.0, 1e-4)
+    truth = simulate(model, fine, force(fine), slip(fine), 60.0).torque_nm
+    write_run_bag(tmp_path / "b", {"applied_force": (tf, force(tf)), "slip_speed": (tf, slip(tf)),
+                                   "sump_temperature": (ts, np.full(ts.size, 60.0)),
+                                   "measured_torque": (tq, np.interp(tq, fine, truth))})
+    run = read_bag(tmp_path / "b")
+    # a line through the rows misses nothing of this force: no grid is made
+    assert force_between_rows(run.torque_measured_t, *run.samples["applied_force"]) < 1.0
+    assert not plant_grid_needed([run])
+    camp = with_midpoint_force(measured_time_campaign([run], rate_hz=1.0))
+    assert camp.runs[0].plant_grid is None
+    # and given one, it would be dropped: the two predictions differ by 0.56 N*m on torques of ~1 kN*m
+    camp = Campaign([replace(r, plant_grid=run_plant_grid(r)) for r in camp.runs])
+    choice = choose_plant_grid(camp, model, noise_nm=4.0)
+    assert not choice.used and choice.rows > 200 and choice.difference_rms_nm < 1.0, choice
