@@ -369,12 +369,13 @@ class PlantGridChoice:
 
 def choose_plant_grid(campaign, model, noise_nm: float = 0.0) -> PlantGridChoice:
     """Keep the runs' plant grids (``run_plant_grid``) where they matter: ``model`` simulated on
-    the campaign's head with them and on the rows alone, kept when the two predictions differ
-    on the slipping rows by PLANT_GRID_MIN_NM and PLANT_GRID_NOISE_FRAC of ``noise_nm`` (the
-    measured torque's noise near Nyquist) at least (both started with the inputs, before the first
-    torque sample: only what the force did between the rows is weighed). A force that moves smoothly between the
-    torque's samples reaches the plant as well through the step's midpoint (input_hold), and
-    the grid then costs simulation time (four to ten times the rows) and changes nothing."""
+    the campaign's head with them and on the rows alone (both started with the inputs, before
+    the first torque sample: only what the force did between the rows is weighed), kept when
+    the two predictions differ on the slipping rows by PLANT_GRID_MIN_NM and
+    PLANT_GRID_NOISE_FRAC of ``noise_nm`` (the measured torque's noise near Nyquist) at least.
+    A force that moves smoothly between the torque's samples reaches the plant as well through
+    the step's midpoint (input_hold), and the grid then costs simulation time (four to ten
+    times the rows) and changes nothing."""
     import math
 
     from clutch_model.diagnosis.input_timing import campaign_head, compare_readings
