@@ -56,6 +56,22 @@ def _grid_of(run):
     return g.t, g.force, g.slip, sump, g.rows
 
 
+def _start_states(runs, sizes) -> tuple:
+    """(start_index, start_states) of runs concatenated in blocks of ``sizes`` rows: the runs
+    with a ``plant_state0`` (diagnosis.sample.WindowRun) start from it; (None, None) when none
+    does."""
+    if not any(getattr(r, "plant_state0", None) is not None for r in runs):
+        return None, None
+    index = np.full(int(sum(sizes)), -1, dtype=np.int64)
+    states, k = [], 0
+    for r, n in zip(runs, sizes):
+        if getattr(r, "plant_state0", None) is not None:
+            index[k] = len(states)
+            states.append(np.asarray(r.plant_state0, float))
+        k += n
+    return index, np.ascontiguousarray(np.stack(states))
+
+
 @dataclass(frozen=True)
 class PlantInputs:
     """The simulator inputs of a campaign on its concatenated grid."""
@@ -84,16 +100,7 @@ class PlantInputs:
         if runs and any(getattr(r, "plant_grid", None) is not None for r in runs):
             return cls._on_plant_grids(runs)
         start = int(runs[0].start_time_ns) if runs else None
-        index, states = None, None
-        if runs and any(getattr(r, "plant_state0", None) is not None for r in runs):
-            index = np.full(len(campaign.t), -1, dtype=np.int64)
-            states, k = [], 0
-            for r in runs:
-                if getattr(r, "plant_state0", None) is not None:
-                    index[k] = len(states)
-                    states.append(np.asarray(r.plant_state0, float))
-                k += len(r)
-            states = np.ascontiguousarray(np.stack(states))
+        index, states = _start_states(runs or [], [len(r) for r in runs or []])
         return cls(t=np.ascontiguousarray(campaign.t, float), force=np.ascontiguousarray(campaign.force, float),
                    slip=np.ascontiguousarray(campaign.slip, float), sump=np.ascontiguousarray(campaign.sump, float),
                    run_start=np.ascontiguousarray(campaign.run_start, bool), first_start_time_ns=start,
@@ -103,7 +110,7 @@ class PlantInputs:
     def _on_plant_grids(cls, runs) -> "PlantInputs":
         """Runs concatenated on their plant grids (a run without one on its rows), ``pick``
         the campaign's rows in them."""
-        parts, picks, index, states = [], [], [], []
+        parts, picks = [], []
         off = 0
         for r in runs:
             part = _grid_of(r)
@@ -112,17 +119,11 @@ class PlantInputs:
             part = tuple(np.asarray(x, float) for x in part[:4]) + (np.asarray(part[4], np.int64),)
             parts.append(part)
             picks.append(part[4] + off)
-            if getattr(r, "plant_state0", None) is not None:
-                index.append(off)
-                states.append(np.asarray(r.plant_state0, float))
             off += part[0].size
+        sizes = [p[0].size for p in parts]
         run_start = np.zeros(off, bool)
-        run_start[np.cumsum([0] + [p[0].size for p in parts[:-1]])] = True
-        start_index = start_states = None
-        if states:
-            start_index = np.full(off, -1, dtype=np.int64)
-            start_index[index] = np.arange(len(states))
-            start_states = np.ascontiguousarray(np.stack(states))
+        run_start[np.cumsum([0] + sizes[:-1])] = True
+        start_index, start_states = _start_states(runs, sizes)
         cat = (lambda k: np.ascontiguousarray(np.concatenate([p[k] for p in parts])))
         return cls(t=cat(0), force=cat(1), slip=cat(2), sump=cat(3), run_start=run_start,
                    first_start_time_ns=int(runs[0].start_time_ns), start_index=start_index,

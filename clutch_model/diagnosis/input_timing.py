@@ -169,11 +169,10 @@ class ReadingComparison:
 def force_sample_period_s(campaign) -> float:
     """The applied force's median sample interval (its own samples; the rows' when a run has
     none), s."""
-    dts = []
-    for run in campaign.runs:
-        ts = run.samples.get("applied_force", (run.t,))[0]
-        if len(ts) > 2:
-            dts.append(float(np.median(np.diff(np.asarray(ts, float)))))
+    from clutch_model.diagnosis.measured_time import median_interval_s
+
+    dts = [median_interval_s(run.samples.get("applied_force", (run.t,))[0]) for run in campaign.runs]
+    dts = [d for d in dts if np.isfinite(d)]
     return float(np.median(dts)) if dts else float("nan")
 
 

@@ -262,7 +262,8 @@ PLANT_GRID_DENSER = 1.5    # the force's samples at least this many times denser
 PLANT_GRID_FORCE_CONTENT = 2.0   # ... doing between the rows this many times its noise (force_between_rows)
 
 
-def _median_interval_s(t) -> float:
+def median_interval_s(t) -> float:
+    """The median interval of sample times ``t``, s (NaN under three samples)."""
     t = np.asarray(t, float)
     return float(np.median(np.diff(t))) if t.size > 2 else float("nan")
 
@@ -284,8 +285,8 @@ def plant_grid_needed(runs) -> bool:
         samples = run.samples.get("applied_force")
         if tq is None or samples is None or tq.size < 3 or samples[0].size < 3:
             continue
-        row.append(_median_interval_s(tq))
-        force.append(_median_interval_s(samples[0]))
+        row.append(median_interval_s(tq))
+        force.append(median_interval_s(samples[0]))
         content.append(force_between_rows(tq, *samples))
     if not row:
         return False
@@ -299,15 +300,16 @@ def force_between_rows(rows_t, sample_t, sample_force) -> float:
     the rms of its samples less the line through its values at the rows, in units of its own
     noise (robust, from first differences: a step is one outlier among them, the noise is in
     all). About 1-1.5 for a smooth force with white sensor noise; steps between the rows take
-    it far above."""
+    it far above. NaN when the force has too few samples to tell (features.noise_sigma)."""
+    from clutch_model.diagnosis.features import noise_sigma
+
     ts, vs = np.asarray(sample_t, float), np.asarray(sample_force, float)
     inside = (ts >= rows_t[0]) & (ts <= rows_t[-1])
-    if inside.sum() < 3:
+    noise = noise_sigma(vs, np.zeros(vs.size, bool))
+    if inside.sum() < 3 or not np.isfinite(noise):
         return float("nan")
     line = np.interp(ts[inside], rows_t, np.interp(rows_t, ts, vs))
     miss = float(np.sqrt(np.mean((vs[inside] - line) ** 2)))
-    dv = np.diff(vs)
-    noise = 1.4826 * float(np.median(np.abs(dv - np.median(dv)))) / np.sqrt(2.0)
     return miss / max(noise, 1e-9 * max(float(np.max(np.abs(vs))), 1.0))
 
 
@@ -318,6 +320,7 @@ def run_plant_grid(run, held: bool = False):
     the run has not its own samples. The grid starts with the first instant with a force and a
     slip sample (``plant_inputs_start_s``), before the first row when the torque began later.
     Force stamps within 0.05 ms of a row are left out (no near-empty steps)."""
+    from clutch_model.diagnosis.input_timing import held_at
     from clutch_model.prediction import PlantGrid
 
     force, slip = run.samples.get("applied_force"), run.samples.get("slip_speed")
@@ -334,10 +337,7 @@ def run_plant_grid(run, held: bool = False):
     t = np.union1d(rows_t, inside)
 
     def read(samples):
-        ts, vs = np.asarray(samples[0], float), np.asarray(samples[1], float)
-        if held:
-            return vs[np.clip(np.searchsorted(ts, t, side="right") - 1, 0, vs.size - 1)]
-        return np.interp(t, ts, vs)
+        return held_at(*samples, t) if held else np.interp(t, *samples)
 
     return PlantGrid(t=t, force=read(force), slip=read(slip), rows=np.searchsorted(t, rows_t))
 
@@ -376,8 +376,6 @@ def choose_plant_grid(campaign, model, noise_nm: float = 0.0) -> PlantGridChoice
     A force that moves smoothly between the torque's samples reaches the plant as well through
     the step's midpoint (input_hold), and the grid then costs simulation time (four to ten
     times the rows) and changes nothing."""
-    import math
-
     from clutch_model.diagnosis.input_timing import campaign_head, compare_readings
 
     if not any(r.plant_grid is not None for r in campaign.runs):
@@ -386,7 +384,7 @@ def choose_plant_grid(campaign, model, noise_nm: float = 0.0) -> PlantGridChoice
     if head is None:
         return PlantGridChoice(used=False)
     cmp = compare_readings(model, without_plant_grid(head, keep_start=True), head)
-    least = max(PLANT_GRID_MIN_NM, PLANT_GRID_NOISE_FRAC * (noise_nm if math.isfinite(noise_nm) else 0.0))
+    least = max(PLANT_GRID_MIN_NM, PLANT_GRID_NOISE_FRAC * (noise_nm if np.isfinite(noise_nm) else 0.0))
     return PlantGridChoice(used=bool(cmp.n >= 10 and cmp.rms >= least), difference_rms_nm=cmp.rms,
                            least_nm=least, rows=cmp.n)
 
@@ -394,11 +392,14 @@ def choose_plant_grid(campaign, model, noise_nm: float = 0.0) -> PlantGridChoice
 def without_plant_grid(campaign, keep_start: bool = False):
     """The campaign simulated on its rows alone (every run's plant grid dropped; ``keep_start``:
     the grid cut to the rows and its first point, so the plant still starts with the inputs,
-    before the first torque sample)."""
+    before the first torque sample); the campaign itself when no run has a grid."""
     from dataclasses import replace
 
     from clutch_model.formats.bag_reader import Campaign
     from clutch_model.prediction import PlantGrid
+
+    if not any(r.plant_grid is not None for r in campaign.runs):
+        return campaign
 
     def cut(r):
         g = r.plant_grid
