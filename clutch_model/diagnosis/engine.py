@@ -32,6 +32,7 @@ from clutch_model.replay import replay_runs
 from clutch_model.formats.bag_reader import Campaign
 from clutch_model.plant.mechanisms import CATALOG
 from clutch_model.diagnosis.decimation import choose_diagnosis_rate, decimate_campaign
+from clutch_model.diagnosis.torque_clock import choose_torque_stamps, clock_ticks, with_torque_stamps
 from clutch_model.diagnosis.measured_time import (choose_plant_grid, measured_time_campaign, topics_unaligned,
                                                   without_plant_grid)
 from clutch_model.plant.simulate import SimResult
@@ -314,12 +315,23 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
     if measured_time:
         # compare where the measurement is: rows at the torque's own stamps, inputs
         # interpolated between their samples (diagnosis.measured_time)
-        campaign = measured_time_campaign(campaign, rate_hz=MEASURED_TIME_GRID_HZ)
         # rows at the torque's stamps are far apart (20 ms at 50 Hz) and the plant holds each
         # row's inputs over its step: give it the force of the step's midpoint (input_hold),
         # or, when the data say the inputs hold between their samples as replay reads them,
         # the mean of the held force over the step (input_timing)
-        campaign = with_midpoint_force(campaign)
+        logged = campaign
+        campaign = with_midpoint_force(measured_time_campaign(logged, rate_hz=MEASURED_TIME_GRID_HZ))
+        # stamps that scatter around the torque sensor's own clock: the values may belong to its
+        # ticks (a gateway stamping frames as they arrive), and the data say (torque_clock)
+        stamps = choose_torque_stamps(campaign, bench_model, clock_ticks(logged),
+                                      noise_nm=input_noise.torque_noise_hf_nm)
+        if stamps.ticks:
+            say(stamps.describe())
+            input_info = {**input_info, **stamps.to_dict()}
+        if stamps.on_clock:
+            campaign = with_midpoint_force(measured_time_campaign(with_torque_stamps(logged, stamps.ticks),
+                                                                  rate_hz=MEASURED_TIME_GRID_HZ))
+        del logged
         timing = choose_input_timing(campaign, bench_model)
         say(timing.describe())
         input_info = {**input_info, **timing.to_dict()}

@@ -107,7 +107,7 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -792,8 +792,7 @@ def synthesize_car_logs(spec: CarLogSpec | None = None, base_model: ClutchModel 
         for ch in chans:
             clock = spec.clocks[ch]
             if spec.random_phase:
-                clock = TopicClock(clock.rate_hz, phase_s=float(rng_clock.uniform(0, 1.0 / clock.rate_hz)),
-                                   jitter_s=clock.jitter_s, quantum_s=clock.quantum_s)
+                clock = replace(clock, phase_s=float(rng_clock.uniform(0, 1.0 / clock.rate_hz)))
             t_true, t_stamp = clock.sample_times(rng_clock, dur)
             clean = sample_signal(t_run, clean_fine[ch], t_true)
             noise = spec.noise[ch].sample(rng_noise, t_true)

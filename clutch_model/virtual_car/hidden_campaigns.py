@@ -37,7 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from clutch_model.plant.mechanisms import CATALOG
-from clutch_model.virtual_car.car_logs import (EFFECTS, CarLogSpec, load_truth_sidecar,
+from clutch_model.virtual_car.car_logs import (DEFAULT_CLOCKS, EFFECTS, CarLogSpec, load_truth_sidecar,
                                                measurement_tail_s, near_true_lock,
                                                score_against_truth, synthesize_car_logs,
                                                true_sensor_torque_at, write_car_logs)
@@ -48,13 +48,17 @@ VERDICTS_WITHOUT_CAUSE = ("none", "unexplained", "discovered")
 # ------------------------------------------------------------------------ conditions
 LAB_CLOCKS = {ch: TopicClock(200.0) for ch in ("applied_force", "slip_speed", "sump_temperature",
                                                "measured_torque", "pack_temperature")}
+# a torque sensor sampling at 125 Hz on its own clock, its frames stamped as they arrive (up to
+# 2.8 ms, 35 % of the period, either side of the instant the value was taken)
+GATEWAY_TORQUE_CLOCK = TopicClock(125.0, arrival_jitter_s=2.8e-3, quantum_s=1e-4)
 
 
 @dataclass(frozen=True)
 class Condition:
-    """How the data look. ``clocks``: "lab" (every topic at 200 Hz on one grid, no jitter) or
+    """How the data look. ``clocks``: "lab" (every topic at 200 Hz on one grid, no jitter),
     "car" (the car-log defaults: force 200 Hz ±1 ms, slip 100 Hz, torque 50 Hz ±1 ms, sump
-    10 Hz, topics unaligned). ``torque_noise``: (kind, options) of the torque sensor's noise,
+    10 Hz, topics unaligned) or "gateway" (the car's, the torque at 125 Hz stamped on arrival,
+    ``GATEWAY_TORQUE_CLOCK``). ``torque_noise``: (kind, options) of the torque sensor's noise,
     σ = 8 N·m. ``size`` / ``quick_size``: (runs diagnose sees, later runs it never sees,
     run duration s)."""
 
@@ -83,6 +87,8 @@ class Condition:
               "resolution": dict(self.resolution or {})}
         if self.clocks == "lab":
             kw.update(clocks=dict(LAB_CLOCKS), random_phase=False)
+        elif self.clocks == "gateway":
+            kw.update(clocks=dict(DEFAULT_CLOCKS, measured_torque=GATEWAY_TORQUE_CLOCK))
         return kw
 
     def seen_runs(self, quick: bool = False) -> int:
@@ -94,6 +100,9 @@ CONDITIONS = {c.name: c for c in (
               "lab"),
     Condition("unaligned", "topics on their own clocks: force 200 Hz ±1 ms, slip 100 Hz ±0.5 ms, "
                            "torque 50 Hz ±1 ms, sump 10 Hz, random phases", "unaligned", clocks="car"),
+    Condition("gateway", "topics on their own clocks, the torque sampled at 125 Hz on its sensor's clock and "
+                         "stamped as its frames arrive (±2.8 ms around the instant sampled)", "unaligned",
+              clocks="gateway"),
     Condition("ar1", "coloured torque noise AR(1) φ 0.95, σ 8 N·m", "coloured-noise",
               torque_noise=("ar1", {"phi": 0.95})),
     Condition("lowpass", "band-limited torque noise (2nd-order 10 Hz)", "filtered-noise",

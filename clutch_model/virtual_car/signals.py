@@ -9,7 +9,9 @@ Timing model: a sample is taken at an irregular instant ``t_true`` (nominal k/ra
 topic's phase plus jitter); its log time is ``t_true`` rounded to the stamp quantum. The
 value is the physical signal at ``t_true`` plus the sensor noise. So jitter is real
 irregular sampling (no mean delay), and quantisation is a stamp error of at most half a
-quantum.
+quantum. A topic stamped on arrival (``arrival_jitter_s``) has its log times scattered around
+``t_true`` on top: a gateway stamping the frames as they come, the values still the signal at
+the instants they were sampled.
 """
 from __future__ import annotations
 
@@ -31,21 +33,25 @@ class TopicClock:
     run start (negative: starts before; samples before 0 are dropped). jitter_s: half-width
     of the uniform sampling jitter (±jitter_s around the nominal instant; clipped to keep
     the order). quantum_s: log-time resolution (stamps rounded to it; 0 = ns).
+    arrival_jitter_s: half-width of the uniform scatter of the stamps around the sampling
+    instants (a gateway stamping the frames as they arrive, the value still the signal at the
+    instant it was sampled; 0 = stamped when sampled).
     """
 
     rate_hz: float
     phase_s: float = 0.0
     jitter_s: float = 0.0
     quantum_s: float = 0.0
+    arrival_jitter_s: float = 0.0
 
     def __post_init__(self):
         if not (0 < self.rate_hz <= 10000):
             raise ParamsError(f"topic clock: rate {self.rate_hz} Hz out of (0, 10000]")
-        if self.jitter_s < 0 or self.quantum_s < 0:
+        if self.jitter_s < 0 or self.quantum_s < 0 or self.arrival_jitter_s < 0:
             raise ParamsError("topic clock: jitter and quantum must be >= 0")
-        if self.jitter_s >= 0.5 / self.rate_hz:
-            raise ParamsError(f"topic clock: jitter ±{self.jitter_s} s must be below half the "
-                              f"sample period {0.5 / self.rate_hz} s")
+        if self.jitter_s + self.arrival_jitter_s >= 0.5 / self.rate_hz:
+            raise ParamsError(f"topic clock: jitter ±{self.jitter_s + self.arrival_jitter_s} s must be below half "
+                              f"the sample period {0.5 / self.rate_hz} s")
 
     def sample_times(self, rng, duration_s: float):
         """(t_true, t_stamp) in s from the run start, strictly increasing stamps in [0, duration)."""
@@ -55,14 +61,19 @@ class TopicClock:
         nominal = self.phase_s + (k0 + np.arange(max(n, 0))) * period
         jit = rng.uniform(-self.jitter_s, self.jitter_s, nominal.size) if self.jitter_s > 0 else 0.0
         t_true = np.clip(nominal + jit, 0.0, duration_s - 1e-9)
+        arrival = (rng.uniform(-self.arrival_jitter_s, self.arrival_jitter_s, t_true.size)
+                   if self.arrival_jitter_s > 0 else 0.0)
         q = self.quantum_s if self.quantum_s > 0 else 1e-9
-        t_stamp = np.round(t_true / q) * q
+        t_stamp = np.round(np.clip(t_true + arrival, 0.0, duration_s - 1e-9) / q) * q
         keep = np.concatenate([[True], np.diff(t_stamp) > 0.5e-9]) if t_stamp.size else np.zeros(0, bool)
         return t_true[keep], t_stamp[keep]
 
     def to_dict(self) -> dict:
-        return {"rate_hz": self.rate_hz, "phase_s": self.phase_s, "jitter_s": self.jitter_s,
-                "quantum_s": self.quantum_s}
+        out = {"rate_hz": self.rate_hz, "phase_s": self.phase_s, "jitter_s": self.jitter_s,
+               "quantum_s": self.quantum_s}
+        if self.arrival_jitter_s > 0:
+            out["arrival_jitter_s"] = self.arrival_jitter_s
+        return out
 
 
 # ------------------------------------------------------------------------------ noise
