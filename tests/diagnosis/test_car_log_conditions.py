@@ -38,6 +38,7 @@ MC_SAMPLES = 40          # Monte Carlo samples of the car calibration (CI budget
 # (4 runs x 8 s seen + 2 unseen; one 40 s bag + 1 unseen; 2 x 20 s + 1 unseen)
 FAST = [
     ("unaligned", "none", 31),                       # topics on own clocks: no false transport_delay
+    ("gateway", "none", 2),                          # the torque stamped on arrival (torque_clock)
     ("ar1", "none", 32),                             # AR(1) phi 0.95 noise is not structure
     ("lowpass", "none", 33),                         # band-limited noise is not structure
     ("lockup", "spring_preload", 34),                # lock phases kept out
