@@ -277,7 +277,86 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
                       candidates=None, calibrate=None, progress=None, bench_info=None,
                       checkpoint=None, measured_time=None, discover=True, diagnosis_rate_hz=None,
                       fit_executor=None, sample_budget_s=SAMPLE_BUDGET_S) -> Diagnosis:
-    """Diagnose a campaign given the bench-fitted model. ``measured_time`` (default: when the
+    """Diagnose a campaign given the bench-fitted model (``_diagnose_reading``, whose docstring
+    says how). Where the data left the inputs' reading between samples open beside a time
+    mechanism (``input_timing.reading_unsettled``: a delay or lag in the data mimics the held
+    reading's half force period), the campaign is diagnosed again with the inputs held, and that
+    diagnosis is kept when it names its causes and predicts the same held-out rows better by
+    ``HELD_READING_GAIN`` (``_held_reading_better``); its outputs are then written in place of
+    the first one's."""
+    kw = dict(held_out=held_out, candidates=candidates, calibrate=calibrate, progress=progress,
+              bench_info=bench_info, measured_time=measured_time, discover=discover,
+              diagnosis_rate_hz=diagnosis_rate_hz, fit_executor=fit_executor, sample_budget_s=sample_budget_s)
+    campaign = runs if isinstance(runs, Campaign) else Campaign(list(runs))
+    del runs
+    first = _diagnose_reading(nominal, bench_model, campaign, checkpoint=checkpoint, **kw)
+    if not _reading_left_open(first):
+        return first
+    say = progress or (lambda msg: None)
+    say("inputs: the reading between samples was left open beside a time mechanism; diagnosing again "
+        "with the inputs held between their samples")
+    stages = []
+    held = _diagnose_reading(nominal, bench_model, campaign, checkpoint=lambda stage, **out: stages.append((stage, out)),
+                             input_reading="held", **kw)
+    better, why = _held_reading_better(first, held)
+    say(f"inputs: {why}")
+    chosen = held if better else first
+    chosen.inputs = {**chosen.inputs, "held_reading_tried": True, "held_reading_kept": better,
+                     "held_reading_why": why}
+    if checkpoint is not None:
+        # the held reading's outputs in place of the first one's, or the first one's report
+        # again with what the held reading gave
+        for stage, out in (stages if better else [("selected", {"diagnosis": first})]):
+            checkpoint(stage, **out)
+    return chosen
+
+
+HELD_READING_GAIN = 0.01   # the held reading's held-out RMSE below the linear one's by this share
+
+
+def _reading_left_open(d: Diagnosis) -> bool:
+    """The inputs were read linearly with the held reading left open (``reading_unsettled``) and
+    the diagnosis names a time mechanism or ends with one as the closest candidate."""
+    if not reading_unsettled(d.inputs or {}):
+        return False
+    ids = [c["id"] for c in d.causes]
+    if d.selection is not None and not ids:
+        ids = list(d.selection.closest or [])
+    return bool(time_mechanism_ids(ids))
+
+
+def _best_held_out_rmse(d: Diagnosis) -> float:
+    """The diagnosis' best held-out RMSE: its extended model's, or where it named nothing, the
+    closest candidate chain's (what it leaves)."""
+    best = d.rmse.get("extended", math.nan)
+    if not d.causes and d.selection is not None:
+        left = (d.selection.closest_leaves or {}).get("held_out_rmse")
+        if left is not None and np.isfinite(left):
+            best = min(best, float(left)) if np.isfinite(best) else float(left)
+    return float(best)
+
+
+def _held_reading_better(linear: Diagnosis, held: Diagnosis) -> tuple:
+    """-> (the held reading's diagnosis is kept, why): it names its causes, on the same held-out
+    rows, and its extended model predicts them better than the linear reading's best by
+    HELD_READING_GAIN."""
+    lin, hel = _best_held_out_rmse(linear), _best_held_out_rmse(held)
+    figures = f"held-out RMSE {hel:.3f} N*m held against {lin:.3f} linear"
+    if list(held.held_out) != list(linear.held_out):
+        return False, f"the held reading's held-out rows differ ({figures}); kept linear"
+    if not held.causes:
+        return False, f"the held reading names nothing ({figures}); kept linear"
+    if not (np.isfinite(lin) and np.isfinite(hel) and hel < (1.0 - HELD_READING_GAIN) * lin):
+        return False, f"the held reading does not predict the held-out rows better ({figures}); kept linear"
+    return True, f"the held reading predicts the held-out rows better ({figures}); kept held"
+
+
+def _diagnose_reading(nominal: ClutchModel, bench_model: ClutchModel, runs, held_out=None,
+                      candidates=None, calibrate=None, progress=None, bench_info=None,
+                      checkpoint=None, measured_time=None, discover=True, diagnosis_rate_hz=None,
+                      fit_executor=None, sample_budget_s=SAMPLE_BUDGET_S, input_reading=None) -> Diagnosis:
+    """Diagnose a campaign given the bench-fitted model. ``input_reading``: "held" reads the
+    inputs held between their samples whatever the data say (``diagnose_campaign``). ``measured_time`` (default: when the
     torque and force topics are not aligned) compares model and measurement at the measured
     torque's own stamps (``measured_time_campaign``) instead of the replay grid.
     ``calibrate(model, fit_campaign)`` may
@@ -335,7 +414,9 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
         timing = choose_input_timing(campaign, bench_model)
         say(timing.describe())
         input_info = {**input_info, **timing.to_dict()}
-        if timing.held:
+        if input_reading == "held" and not timing.held:
+            input_info["inputs_between_samples"] = "held"
+        if timing.held or input_reading == "held":
             campaign = with_held_inputs(campaign)
         # rows too sparse for the plant: its grid on the force's own samples, where it matters
         grid = choose_plant_grid(campaign, bench_model, noise_nm=input_noise.torque_noise_hf_nm)
