@@ -169,3 +169,49 @@ def test_a_force_rate_term_is_read_as_the_force_timing():
     assert not reading_unsettled({"inputs_between_samples": "linear", "held_weight": 0.1})
     assert not reading_unsettled({"inputs_between_samples": "held", "held_weight": 1.0})
     assert not reading_unsettled({})
+
+
+def _diagnosis(causes=(), closest=(), extended=5.0, closest_rmse=None, held_out=("a[0:10]",), inputs=None):
+    from types import SimpleNamespace
+    sel = SimpleNamespace(closest=list(closest),
+                          closest_leaves={} if closest_rmse is None else {"held_out_rmse": closest_rmse})
+    return SimpleNamespace(causes=[{"id": c} for c in causes], selection=sel, held_out=list(held_out),
+                           rmse={"extended": extended},
+                           inputs=inputs if inputs is not None else {"inputs_between_samples": "linear",
+                                                                     "held_weight": BETA_HELD_MAX + 3})
+
+
+def test_the_held_reading_is_tried_only_where_a_time_mechanism_left_it_open():
+    """diagnose_campaign diagnoses again with the inputs held where the linear reading's weight
+    on the held one was above the bar and the diagnosis names a time mechanism, or ends with one
+    as the closest candidate (engine._reading_left_open)."""
+    from clutch_model.diagnosis.engine import _reading_left_open
+    assert _reading_left_open(_diagnosis(causes=["torque_sensor_lag"]))
+    assert _reading_left_open(_diagnosis(closest=["actuator_lag"]))
+    assert _reading_left_open(_diagnosis(causes=["transport_delay", "drag_torque"]))
+    assert not _reading_left_open(_diagnosis(causes=["drag_torque"]))
+    assert not _reading_left_open(_diagnosis())
+    settled = {"inputs_between_samples": "linear", "held_weight": 0.2}
+    assert not _reading_left_open(_diagnosis(causes=["actuator_lag"], inputs=settled))
+    assert not _reading_left_open(_diagnosis(causes=["actuator_lag"], inputs={"inputs_between_samples": "held",
+                                                                                "held_weight": 1.0}))
+
+
+def test_the_held_reading_is_kept_only_when_it_names_and_predicts_better():
+    """The held reading's diagnosis replaces the linear one's when it names its causes and its
+    extended model predicts the same held-out rows 1 % better than the linear one's best (its
+    extended model, or what its closest candidate leaves)."""
+    from clutch_model.diagnosis.engine import HELD_READING_GAIN, _held_reading_better
+    linear = _diagnosis(closest=["torque_sensor_lag"], extended=31.1, closest_rmse=5.185)
+    assert _held_reading_better(linear, _diagnosis(causes=["torque_sensor_lag"], extended=5.014))[0]
+    # a gain under the bar, nothing named, or other held-out rows: the linear reading stays
+    assert not _held_reading_better(linear, _diagnosis(causes=["torque_sensor_lag"],
+                                                       extended=5.185 * (1 - HELD_READING_GAIN / 2)))[0]
+    assert not _held_reading_better(linear, _diagnosis(closest=["torque_sensor_lag"], extended=4.0,
+                                                       closest_rmse=4.0))[0]
+    assert not _held_reading_better(linear, _diagnosis(causes=["torque_sensor_lag"], extended=5.0,
+                                                       held_out=("b[0:10]",)))[0]
+    # against a linear reading that named its cause, its extended model is the bar
+    named = _diagnosis(causes=["actuator_lag"], extended=5.0)
+    assert not _held_reading_better(named, _diagnosis(causes=["actuator_lag"], extended=4.99))[0]
+    assert _held_reading_better(named, _diagnosis(causes=["actuator_lag"], extended=4.9))[0]
