@@ -214,4 +214,4 @@ def test_the_held_reading_is_kept_only_when_it_names_and_predicts_better():
     # against a linear reading that named its cause, its extended model is the bar
     named = _diagnosis(causes=["actuator_lag"], extended=5.0)
     assert not _held_reading_better(named, _diagnosis(causes=["actuator_lag"], extended=4.99))[0]
-    assert _held_reading_better(named, _diagnosis(causes=["actuator_lag"], extended=4.9))[0]
+    assert _held_reading_better(named, _diagnosis(causes=["actuator_lag"], extended=4.8))[0]
