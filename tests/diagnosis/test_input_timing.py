@@ -215,3 +215,36 @@ def test_the_held_reading_is_kept_only_when_it_names_and_predicts_better():
     named = _diagnosis(causes=["actuator_lag"], extended=5.0)
     assert not _held_reading_better(named, _diagnosis(causes=["actuator_lag"], extended=4.99))[0]
     assert _held_reading_better(named, _diagnosis(causes=["actuator_lag"], extended=4.8))[0]
+
+
+@pytest.mark.parametrize("held_rmse,kept", [(5.0, True), (5.15, False)])
+def test_the_held_reading_s_outputs_are_written_in_place_of_the_first(monkeypatch, held_rmse, kept):
+    """diagnose_campaign's second diagnosis writes through a recorder: kept, its stages reach
+    the writer in order after the first one's; not kept, the first one's report is written
+    again with what the held reading gave (engine.diagnose_campaign)."""
+    import clutch_model.diagnosis.engine as engine
+    first = _diagnosis(closest=["torque_sensor_lag"], extended=31.1, closest_rmse=5.185)
+    second = _diagnosis(causes=["torque_sensor_lag"], extended=held_rmse,
+                        inputs={"inputs_between_samples": "held", "held_weight": BETA_HELD_MAX + 3})
+    readings = []
+
+    def fake(nominal, bench_model, campaign, checkpoint=None, input_reading=None, **kw):
+        readings.append(input_reading)
+        d = second if input_reading == "held" else first
+        checkpoint("calibrated", which=input_reading)
+        checkpoint("selected", diagnosis=d)
+        return d
+
+    monkeypatch.setattr(engine, "_diagnose_reading", fake)
+    written = []
+    _, campaign = _log(True, seed=8, duration_s=1.0)
+    got = engine.diagnose_campaign(None, None, campaign,
+                                   checkpoint=lambda stage, **out: written.append((stage, out)))
+    assert readings == [None, "held"]
+    assert got is (second if kept else first)
+    assert got.inputs["held_reading_tried"] and got.inputs["held_reading_kept"] is kept
+    stages = [(s, o.get("which", o.get("diagnosis"))) for s, o in written]
+    if kept:
+        assert stages == [("calibrated", None), ("selected", first), ("calibrated", "held"), ("selected", second)]
+    else:
+        assert stages == [("calibrated", None), ("selected", first), ("selected", first)]
