@@ -66,6 +66,10 @@ BETA_HELD_MAX = 4.0      # ... and up to this one: far later than both readings,
                          # is in the data and the weight says nothing of the reading
 MIN_SLIP_RAD_S = 0.3     # rows compared: slipping (a lock phase's torque is the driveline's)
 MAX_ROWS = 200_000       # rows simulated per reading, shared by the runs from their starts
+# two readings of one log (the inputs', the sump's, the torque's stamps; the plant on its grid or
+# its rows) are told apart only where their predictions differ by this much at least ...
+READING_MIN_DIFFERENCE_NM = 0.1
+READING_NOISE_FRAC = 0.3  # ... and by this share of the measured torque's noise near Nyquist
 HYSTERESIS_PROBE_RATIO = 0.03   # the band of the hysteresis whose shape joins the regression ...
 HYSTERESIS_MIN_BAND = 0.01      # ... and the band it must find in the data to keep its place there
 
@@ -195,6 +199,13 @@ def campaign_head(campaign, max_rows: int = MAX_ROWS, keep=None):
     runs = [run_rows(r, slice(0, per_run)) for r in campaign.runs if r.torque_measured_nm is not None]
     runs = [r for r in runs if keep is None or keep(r)]
     return Campaign(runs) if runs else None
+
+
+def difference_bar_nm(noise_nm: float) -> float:
+    """How far two readings' predictions must differ (rms, N*m) for the data to choose between
+    them: READING_MIN_DIFFERENCE_NM, and READING_NOISE_FRAC of ``noise_nm`` (the measured
+    torque's noise near Nyquist; NaN counts as 0)."""
+    return max(READING_MIN_DIFFERENCE_NM, READING_NOISE_FRAC * (noise_nm if np.isfinite(noise_nm) else 0.0))
 
 
 def compare_readings(model, first, second, min_slip_rad_s: float = MIN_SLIP_RAD_S) -> ReadingComparison:

@@ -342,8 +342,6 @@ def run_plant_grid(run, held: bool = False):
     return PlantGrid(t=t, force=read(force), slip=read(slip), rows=np.searchsorted(t, rows_t))
 
 
-PLANT_GRID_MIN_NM = 0.1        # the plant grid is kept where it moves the prediction by this much ...
-PLANT_GRID_NOISE_FRAC = 0.3    # ... and by this fraction of the torque's noise near Nyquist
 
 
 @dataclass
@@ -371,12 +369,12 @@ def choose_plant_grid(campaign, model, noise_nm: float = 0.0) -> PlantGridChoice
     """Keep the runs' plant grids (``run_plant_grid``) where they matter: ``model`` simulated on
     the campaign's head with them and on the rows alone (both started with the inputs, before
     the first torque sample: only what the force did between the rows is weighed), kept when
-    the two predictions differ on the slipping rows by PLANT_GRID_MIN_NM and
-    PLANT_GRID_NOISE_FRAC of ``noise_nm`` (the measured torque's noise near Nyquist) at least.
+    the two predictions differ on the slipping rows by ``input_timing.difference_bar_nm`` of
+    ``noise_nm`` (the measured torque's noise near Nyquist) at least.
     A force that moves smoothly between the torque's samples reaches the plant as well through
     the step's midpoint (input_hold), and the grid then costs simulation time (four to ten
     times the rows) and changes nothing."""
-    from clutch_model.diagnosis.input_timing import campaign_head, compare_readings
+    from clutch_model.diagnosis.input_timing import campaign_head, compare_readings, difference_bar_nm
 
     if not any(r.plant_grid is not None for r in campaign.runs):
         return PlantGridChoice(used=False)
@@ -384,7 +382,7 @@ def choose_plant_grid(campaign, model, noise_nm: float = 0.0) -> PlantGridChoice
     if head is None:
         return PlantGridChoice(used=False)
     cmp = compare_readings(model, without_plant_grid(head, keep_start=True), head)
-    least = max(PLANT_GRID_MIN_NM, PLANT_GRID_NOISE_FRAC * (noise_nm if np.isfinite(noise_nm) else 0.0))
+    least = difference_bar_nm(noise_nm)
     return PlantGridChoice(used=bool(cmp.n >= 10 and cmp.rms >= least), difference_rms_nm=cmp.rms,
                            least_nm=least, rows=cmp.n)
 

@@ -31,9 +31,9 @@ delay in the data, torque ~ p - tau dp/dt, moves engagement transients as a cold
     measured - smoothed = beta * d + gamma * smoothed + c + kappa * d(smoothed)/dt + noise
 
 beta = 0 says smoothed, 1 says as logged; the logged reading is taken when BETA_LOGGED < beta
-<= BETA_LOGGED_MAX. Where the two readings hardly differ (d below MIN_DIFFERENCE_NM rms, or
-below MIN_DIFFERENCE_NOISE of the torque's noise near Nyquist) the weight says nothing and the
-smoothed reading is kept, as it was before the choice: over 45 outside campaigns the weight was
+<= BETA_LOGGED_MAX. Where the two readings hardly differ (d below
+``input_timing.difference_bar_nm``: 0.1 N*m rms, or 0.3 of the torque's noise near Nyquist) the
+weight says nothing and the smoothed reading is kept, as it was before the choice: over 45 outside campaigns the weight was
 0.67-1.17 wherever d reached 0.3 of that noise, and anywhere from -22 to 222 below it; on the
 virtual car (the clutch against the true sump) a friction that follows the slip's acceleration
 took it to 3.0 at d = 0.85 N*m under 8 N*m of noise, and the logged reading lost that effect.
@@ -44,16 +44,15 @@ gives the figures and the decision (``sump_reading``, ``sump_logged_weight``,
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, replace
 
 import numpy as np
 
+from clutch_model.diagnosis.input_timing import READING_MIN_DIFFERENCE_NM
+
 SMOOTH_WINDOW_S = 2.0
 BETA_LOGGED = 0.5          # the logged reading is taken above this weight on it ...
 BETA_LOGGED_MAX = 4.0      # ... and up to this one (far beyond, something else moves the torque)
-MIN_DIFFERENCE_NM = 0.1    # the readings' predictions differ by less: the choice is immaterial ...
-MIN_DIFFERENCE_NOISE = 0.3 # ... or by less than this share of the torque's noise near Nyquist
 MIN_SLIP_RAD_S = 0.3       # rows compared: slipping (a lock phase's torque is the driveline's)
 MAX_ROWS = 200_000         # rows simulated per reading, shared by the runs from their starts
 
@@ -103,7 +102,7 @@ class SumpReading:
     beta: float                 # weight on the logged reading (0 smoothed, 1 as logged)
     rows: int                   # rows compared
     difference_rms_nm: float    # rms of logged - smoothed prediction on them
-    least_nm: float = MIN_DIFFERENCE_NM   # the difference below which the choice is not made
+    least_nm: float = READING_MIN_DIFFERENCE_NM   # the difference below which the choice is not made
 
     def describe(self) -> str:
         what = "as logged (held, as replay)" if self.logged else "smoothed"
@@ -128,16 +127,16 @@ def choose_sump_reading(campaign, model, noise_nm: float = 0.0, max_rows: int = 
     """Which reading of the sump temperature the measured torque sides with (module
     docstring): ``model`` simulated on both readings of the first ``max_rows`` rows (shared
     by the runs from their starts), the torque regressed on the difference when the two differ
-    by MIN_DIFFERENCE_NM and MIN_DIFFERENCE_NOISE times ``noise_nm`` (the measured torque's
-    noise near Nyquist) at least."""
-    from clutch_model.diagnosis.input_timing import campaign_head, compare_readings
+    by ``input_timing.difference_bar_nm`` of ``noise_nm`` (the measured torque's noise near
+    Nyquist) at least."""
+    from clutch_model.diagnosis.input_timing import campaign_head, compare_readings, difference_bar_nm
 
     head = campaign_head(campaign, max_rows)
     if head is None:
         return SumpReading(logged=False, beta=float("nan"), rows=0, difference_rms_nm=0.0)
     cmp = compare_readings(model, smooth_sump(head), logged_sump(head), MIN_SLIP_RAD_S)
     p_smooth, y, ok, d, n, rms = cmp.p_first, cmp.y, cmp.ok, cmp.d, cmp.n, cmp.rms
-    least = max(MIN_DIFFERENCE_NM, MIN_DIFFERENCE_NOISE * (noise_nm if math.isfinite(noise_nm) else 0.0))
+    least = difference_bar_nm(noise_nm)
     if n < 10 or not rms >= least:
         return SumpReading(logged=False, beta=float("nan"), rows=n, difference_rms_nm=rms, least_nm=least)
     # the smoothed prediction's rate: a lag or delay in the data (torque ~ p - tau dp/dt) moves

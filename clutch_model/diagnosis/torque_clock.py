@@ -29,7 +29,7 @@ and the measured torque regressed on their difference beside p(s) and a constant
 The jitter is independent of whatever else the model gets wrong, so beta reads 1 when the values
 belong to the ticks and 0 when they belong to the stamps. The ticks are taken when beta exceeds
 ``BETA_CLOCK`` by two standard errors and the two readings differ by a share of the torque's
-noise (``MIN_NOISE_FRAC``); the torque is then compared at its ticks. On the virtual car's
+noise (``input_timing.difference_bar_nm``); the torque is then compared at its ticks. On the virtual car's
 `gateway` condition (a smooth torque at 125 Hz stamped on arrival) the readings differ by
 1.2 N*m against 8 N*m of noise: the weight is 1.09 with nothing hidden and -0.98 under a 112 ms
 sensor lag, 72 N*m off the bench model, and the stamps are kept either way.
@@ -46,8 +46,6 @@ PERIOD_STEPS = 801
 HEAD_STAMPS = 4000             # the period is found on a run's first stamps, then fitted along it
 MIN_COHERENCE = 0.25           # |mean exp(2 pi i t / T)| of the stamps on the clock's period
 BETA_CLOCK = 0.5
-MIN_NOISE_FRAC = 0.3           # the readings' rms difference, in the torque's noise near Nyquist
-MIN_DIFFERENCE_NM = 0.1
 MAX_ROWS = 20000
 
 
@@ -67,8 +65,7 @@ def regular_clock(stamps) -> np.ndarray | None:
     # the coherence peak is ~period / span wide: a first pass on a coarse grid, then a fine one
     coh = np.array([abs(_coherence(head, p)) for p in periods])
     k = int(np.argmax(coh))
-    lo, hi = periods[max(k - 1, 0)], periods[min(k + 1, periods.size - 1)]
-    fine = np.linspace(lo, hi, 41)
+    fine = np.linspace(periods[max(k - 1, 0)], periods[min(k + 1, periods.size - 1)], 41)
     coh_fine = np.array([abs(_coherence(head, p)) for p in fine])
     period = float(fine[int(np.argmax(coh_fine))])
     if coh_fine.max() < MIN_COHERENCE:
@@ -161,7 +158,7 @@ def choose_torque_stamps(campaign, model, ticks: dict, noise_nm: float = 0.0,
     """Whether the measured torque belongs to its clock's ``ticks`` (``clock_ticks``) or to its
     stamps (module doc): ``model`` simulated on the head of ``campaign`` (the measured-time
     campaign at the stamps) and read at both."""
-    from clutch_model.diagnosis.input_timing import MIN_SLIP_RAD_S, campaign_head
+    from clutch_model.diagnosis.input_timing import MIN_SLIP_RAD_S, campaign_head, difference_bar_nm
     from clutch_model.prediction import predict_campaign
 
     if not ticks:
@@ -198,7 +195,7 @@ def choose_torque_stamps(campaign, model, ticks: dict, noise_nm: float = 0.0,
     ok = np.isfinite(y) & np.isfinite(ps) & np.isfinite(pr) & (np.abs(slip) > MIN_SLIP_RAD_S)
     d = (pr - ps)[ok]
     rms = float(np.sqrt(np.mean(d * d))) if d.size else 0.0
-    least = max(MIN_DIFFERENCE_NM, MIN_NOISE_FRAC * (noise_nm if np.isfinite(noise_nm) else 0.0))
+    least = difference_bar_nm(noise_nm)
     beta, se = float("nan"), float("inf")
     if d.size >= 10 and rms > 0:
         a = np.column_stack([d, ps[ok], np.ones(d.size)])
