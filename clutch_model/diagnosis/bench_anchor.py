@@ -224,7 +224,7 @@ def none_or_bench_anchored(data, sel, ctx, candidate_ids, alpha: float, min_gain
     verdict other than ``none``, or no bench friction apart from the calibrated one,
     ``ctx.bench_model``)."""
     from clutch_model.diagnosis.candidates import ModelFit, fit_alone
-    from clutch_model.diagnosis.selection import Cause, Selection, parameter_ci95, residual
+    from clutch_model.diagnosis.selection import Cause, parameter_ci95, residual
     from clutch_model.diagnosis.structure_test import DEFAULT_MAX_ORDER
 
     bench_model = ctx.bench_model
@@ -250,8 +250,7 @@ def none_or_bench_anchored(data, sel, ctx, candidate_ids, alpha: float, min_gain
                f"({check.gap_text()}) that {cid} and {untold} on the bench friction each account for, and the "
                f"held-out rows do not tell them apart (t = {check.found['runner_up']['held_out_t']:.1f})")
         left = {"held_out_rmse": float(vs_bench.rmse_alt), "bench_anchor": check.found}
-        return (Selection("unexplained", [], sel.steps, sel.final, sel.baseline_structure,
-                          sel.remainder_structure, [cid, untold], left, why, sel.run_level), check.found)
+        return (sel.overruled([cid, untold], left, why), check.found)
     # a friction level off the bench's accounts for the gap as well: outside the catalog
     beats_level, level, vs_level = check.against_level(cid, fitted, bench_base, ctx, train, say)
     if not beats_level:
@@ -260,8 +259,7 @@ def none_or_bench_anchored(data, sel, ctx, candidate_ids, alpha: float, min_gain
                f"friction moved by a constant (mu {level.parameters['shift']:+.4f}: {vs_level.rmse_null:.2f} N*m, "
                f"{cid} better at t = {vs_level.t_stat:.1f}): a friction level off the bench's, outside the catalog")
         left = {"held_out_rmse": float(vs_bench.rmse_alt), "bench_anchor": check.found}
-        return (Selection("unexplained", [], sel.steps, sel.final, sel.baseline_structure,
-                          sel.remainder_structure, [cid], left, why, sel.run_level), check.found)
+        return (sel.overruled([cid], left, why), check.found)
     say(f"95 % intervals of {cid} (on the bench friction)")
     ci = parameter_ci95(None, fitted, data, None, max_order=DEFAULT_MAX_ORDER)
     why = (f"nothing predicts the held-out residual of the calibrated model, but the calibration absorbed a "
@@ -278,8 +276,6 @@ def _far_gap_unexplained(sel, check: _Check, say):
     when the gap is within what the bench fit's own extrapolation to the car gives
     (``BENCH_GAP_FAR``), else ``unexplained`` with the mechanism that closed most of it as the
     closest candidate (module doc)."""
-    from clutch_model.diagnosis.selection import Selection
-
     gap_frac = check.found["gap_frac"]
     if gap_frac < BENCH_GAP_FAR:
         return sel
@@ -296,8 +292,7 @@ def _far_gap_unexplained(sel, check: _Check, say):
         f"for it: unexplained")
     left = {"held_out_rmse": float(tried[closest]["held_out_rmse"]) if closest else float(check.gap.rmse_null),
             "bench_anchor": check.found}
-    return Selection("unexplained", [], sel.steps, sel.final, sel.baseline_structure, sel.remainder_structure,
-                     [closest] if closest else [], left, why, sel.run_level)
+    return sel.overruled([closest] if closest else [], left, why)
 
 
 def named_and_bench_anchored(data, sel, ctx, candidate_ids, alpha: float, min_gain_frac: float,

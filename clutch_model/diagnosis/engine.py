@@ -1417,8 +1417,7 @@ def _degradation_or_fade(data: SelectionData, base, campaign: Campaign, bench_mo
            f"fade beyond the catalog ({', '.join(found.parameters)}: held-out t = {fade_better.t_stat:.1f} "
            f"and {deg_better.t_stat:.1f} head to head)")
     left = {"held_out_rmse": _rmse(r_deg, data.test_mask)}
-    unexplained = Selection("unexplained", [], sel.steps, base, sel.baseline_structure, sel.remainder_structure,
-                            [c.id for c in sel.causes] + ["discovered"], left, why, sel.run_level)
+    unexplained = sel.overruled([c.id for c in sel.causes] + ["discovered"], left, why, final=base)
     return unexplained, DiscoveryOutcome(dsel, False)
 
 

@@ -404,7 +404,7 @@ def _rival_in_place(data, sel, base, stand_in: list, fit, what: str, key: str, a
     wins; the weaker comparison decides -> (selection, the dict for the report). The rival
     taking the name turns the verdict ``unexplained``, the named causes the closest, the
     rival's figures under ``key`` in what they leave."""
-    from clutch_model.diagnosis.selection import Selection, _compare, residual
+    from clutch_model.diagnosis.selection import _compare, residual
     from clutch_model.diagnosis.structure_test import DEFAULT_MAX_ORDER
 
     ids = [m.id for m in stand_in]
@@ -452,8 +452,7 @@ def _rival_in_place(data, sel, base, stand_in: list, fit, what: str, key: str, a
            f"place of {', '.join(ids)} predicts it better head to head (against {found_against}: {how}, "
            f"RMSE {head.rmse_alt:.2f} against {head.rmse_null:.2f} N*m): {conclusion}")
     left = {"held_out_rmse": float(head.rmse_null), key: found}
-    return (Selection("unexplained", [], sel.steps, sel.final, sel.baseline_structure, sel.remainder_structure,
-                      list(sel.cause_ids), left, why, sel.run_level), found)
+    return (sel.overruled(list(sel.cause_ids), left, why), found)
 
 
 # -- a play of constant width: the rival beyond the catalog of a named actuator_hysteresis -------
@@ -801,7 +800,7 @@ def _none_against(data, sel, fit, kind: str, what: str, physics: str, key: str, 
     the innovations short of it, when it halves the plain held-out mean square of both
     (``_halves_the_plain_squares``). The verdict is then ``unexplained``, the rival's figures
     under ``key`` in what is left."""
-    from clutch_model.diagnosis.selection import (Selection, _compare, _own_contribution, residual,
+    from clutch_model.diagnosis.selection import (_compare, _own_contribution, residual,
                                                   residual_of_prediction)
     from clutch_model.diagnosis.structure_test import DEFAULT_MAX_ORDER
 
@@ -835,8 +834,7 @@ def _none_against(data, sel, fit, kind: str, what: str, physics: str, key: str, 
     why = (f"{sel.reason}; but a force path beyond the catalog does: {physics} predicts the held-out "
            f"residual (t = {head.t_stat:.1f}, RMSE {head.rmse_alt:.2f} against {head.rmse_null:.2f} N*m)")
     left = {"held_out_rmse": float(head.rmse_null), key: found}
-    return (Selection("unexplained", [], sel.steps, sel.final, sel.baseline_structure, sel.remainder_structure,
-                      [], left, why, sel.run_level), found)
+    return (sel.overruled([], left, why), found)
 
 
 NONE_PLAY_STARTS_N = tuple(np.geomspace(30.0, 1500.0, 8))   # the play's starts where nothing is named

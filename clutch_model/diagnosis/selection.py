@@ -29,7 +29,7 @@ The verdict:
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Callable, Protocol, Sequence
 
 import numpy as np
@@ -165,6 +165,14 @@ class Selection:
     @property
     def cause_ids(self) -> list:
         return [c.id for c in self.causes]
+
+    def overruled(self, closest: list, leaves: dict, reason: str, final=None) -> "Selection":
+        """This selection's answer turned into ``unexplained`` by a later check: the same steps,
+        structure tests and run levels, nothing named, ``closest`` the candidate chain that came
+        nearest and ``leaves`` what it leaves; ``final`` replaces the fitted model when given
+        (the baseline, where the named causes are withdrawn)."""
+        return replace(self, verdict="unexplained", causes=[], final=self.final if final is None else final,
+                       closest=list(closest), closest_leaves=leaves, reason=reason)
 
 
 def row_interval_s(t, run_start) -> float:

@@ -194,7 +194,7 @@ def none_or_torque_line(data, sel, campaign, alpha: float, say=lambda msg: None)
     """A selection that named nothing, checked for a torque oscillation whose amplitude follows the
     inputs (``line_check``) -> (selection, what the check found, or None when there was nothing
     to check)."""
-    from clutch_model.diagnosis.selection import Selection, leaves_of, residual
+    from clutch_model.diagnosis.selection import leaves_of, residual
 
     if sel.verdict != "none" or sel.final is None:
         return sel, None
@@ -218,5 +218,4 @@ def none_or_torque_line(data, sel, campaign, alpha: float, say=lambda msg: None)
            f"around it) with an amplitude the inputs predict on held-out rows ({100 * cut:.0f} % of its "
            f"mean square, t = {t_env:.1f}): a torque oscillation beyond the catalog (a judder)")
     left = {**leaves_of(data, r, None), "torque_line": found}
-    return (Selection("unexplained", [], sel.steps, sel.final, sel.baseline_structure, sel.remainder_structure,
-                      [], left, why, sel.run_level), found)
+    return (sel.overruled([], left, why), found)
