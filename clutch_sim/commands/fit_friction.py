@@ -17,7 +17,8 @@ def add_parser(sub):
     p.add_argument("--mu-offset", type=float, default=None, metavar="X",
                    help="upper bound of mu_C (eq. 4.5; default: the largest mu in the bench data)")
     p.add_argument("--joint", action="store_true",
-                   help="after the two-stage fit, refine all 20 coefficients and i together (beyond the thesis)")
+                   help="after the two-stage fit, refine all 20 coefficients together, i at the base model's constant "
+                        "unless freeing it is significantly better (beyond the thesis; diagnose always does)")
     p.add_argument("--low-slip-max", type=float, default=None, metavar="RAD_S",
                    help="rows with |slip| <= this feed the mu_S fit (default: the lowest slip level)")
     p.add_argument("--starts", type=int, default=3, metavar="N", help="random starts besides RC-1 and flat ones")
