@@ -503,3 +503,57 @@ def test_a_resonant_torque_sensor_is_recovered_by_the_second_order_reading():
     assert fit.parameters["f_n_hz"] == pytest.approx(6.0, rel=0.1)
     assert fit.parameters["damping"] == pytest.approx(0.3, rel=0.2)
     assert rmse(fit.predicted) < 0.1 * rmse(plant)
+
+
+@pytest.mark.parametrize("f_n,zeta", [(36.7, 1.85), (3.0, 1.2)])
+def test_an_overdamped_force_path_is_two_first_order_lags(f_n, zeta):
+    """overdamped_poles_s: the second-order path equals two first-order lags in series with the
+    time constants it returns (solve_ivp on the lags)."""
+    from clutch_model.diagnosis.force_dynamics import overdamped_poles_s
+
+    slow, fast = overdamped_poles_s(f_n, zeta)
+    assert slow > fast > 0
+    t = np.arange(0.0, 1.5, 0.0005)
+    force = 2000 + 1500 * np.sin(2 * np.pi * 1.7 * t) + 800 * (np.sin(2 * np.pi * 0.9 * t) > 0)
+    run_start = np.zeros(t.size, bool)
+    run_start[0] = True
+
+    def rhs(tt, z):
+        return [(np.interp(tt, t, force) - z[0]) / slow, (z[0] - z[1]) / fast]
+    ref = solve_ivp(rhs, (t[0], t[-1]), [force[0], force[0]], t_eval=t, rtol=1e-10, atol=1e-8, method="DOP853",
+                    max_step=0.0005).y[1]
+    np.testing.assert_allclose(second_order_force(t, force, run_start, f_n, zeta), ref, rtol=0, atol=2e-4 * np.ptp(force))
+    assert overdamped_poles_s(f_n, 0.7) is None                 # it rings: no first-order pair
+
+
+def test_a_force_path_whose_fast_pole_is_below_the_row_resolution_does_not_take_the_name(monkeypatch):
+    """A named actuator lag met by an overdamped rival whose second pole (1.3 ms) is shorter than
+    half the 8 ms rows: the rival is the lag itself with a sub-row timing term, and the named lag
+    stands without a head-to-head (which it lost at t = 15.4 on an outside generator's campaign)."""
+    from types import SimpleNamespace
+
+    from clutch_model.diagnosis import force_dynamics as FD
+
+    t = np.arange(0.0, 20.0, 0.008)
+    run_start = np.zeros(t.size, bool)
+    run_start[0] = True
+    data = SimpleNamespace(t=t, run_start=run_start, train_mask=np.ones(t.size, bool))
+    sel = SimpleNamespace(verdict="named", cause_ids=["actuator_lag"], final=object())
+    lag = SimpleNamespace(id="actuator_lag", values={"tau_s": 0.015})
+    monkeypatch.setattr(FD, "taken_out", lambda final, ids: ([lag], object(), 1.0))
+
+    def fitted(f_n, zeta):
+        return lambda *a, **k: SimpleNamespace(parameters={"f_n_hz": f_n, "damping": zeta})
+
+    def head_to_head(*a, **k):
+        return "compared", {"took_the_name": True}
+    monkeypatch.setattr(FD, "_rival_in_place", head_to_head)
+
+    monkeypatch.setattr(FD, "fit_second_order", fitted(36.7, 1.85))
+    kept, found = FD.named_or_force_dynamics(data, sel, None, 1.0, 1e-3, 0.005)
+    assert kept is sel and found["fast_pole_below_resolution"] and not found["took_the_name"]
+    assert found["pole_time_constants_s"][1] == pytest.approx(1.27e-3, rel=0.01)
+    # a pole the rows resolve (8 Hz at 1.5: 52 and 7.6 ms) or a ringing path meets the named lag
+    for f_n, zeta in ((8.0, 1.5), (5.0, 0.6)):
+        monkeypatch.setattr(FD, "fit_second_order", fitted(f_n, zeta))
+        assert FD.named_or_force_dynamics(data, sel, None, 1.0, 1e-3, 0.005)[0] == "compared"
