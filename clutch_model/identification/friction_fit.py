@@ -401,13 +401,17 @@ def _starts(problem: _Problem, data: BenchArrays, a_base, i_base, n_random, rng)
 STATIC_SEEN_MIN = 0.05   # joint refinement frees mu_S where some bench row has exp(-(w/omega_S)^i) above it
 
 
-def _static_seen(data: BenchArrays, a, i) -> float:
-    """How much of mu_S - mu_C the bench's slowest row sees: the largest Stribeck factor
-    exp(-(|w|/omega_S)^i) over the bench rows (0: the bench never slips slowly enough to see
-    mu_S at all)."""
-    M = monomials(data.pressure_mpa, data.plate_temperature_c)
+def _stribeck_factor(data: BenchArrays, a, i, rows=slice(None)) -> np.ndarray:
+    """exp(-(|w|/omega_S)^i) on the bench ``rows``: the share of mu_S - mu_C each row sees."""
+    M = monomials(data.pressure_mpa[rows], data.plate_temperature_c[rows])
     ws = np.maximum(M @ np.asarray(a, float)[10:15], 1e-6)
-    return float(np.max(np.exp(-np.power(np.abs(data.slip_speed_rad_s) / ws, i))))
+    return np.exp(-np.power(np.abs(data.slip_speed_rad_s[rows]) / ws, i))
+
+
+def _static_seen(data: BenchArrays, a, i) -> float:
+    """How much of mu_S - mu_C the bench's slowest row sees: the largest Stribeck factor over
+    the bench rows (0: the bench never slips slowly enough to see mu_S at all)."""
+    return float(np.max(_stribeck_factor(data, a, i)))
 
 
 def _joint_refinement(data, a_fixed, free, a_fit, i_fit, i_base, mu_offset, fit_i, rmse2, log, notes):
@@ -444,6 +448,8 @@ def _joint_refinement(data, a_fixed, free, a_fit, i_fit, i_base, mu_offset, fit_
                     "success": bool(res.success), "iterations": int(res.nit)})
         return (prob, res.x, a, i, float(r @ r)) if feasible else None
 
+    m = data.friction_coefficient.size
+    dof = max(m - len(joint_free) - 1, 1)      # residual degrees of freedom with i free
     prob_c = _Problem(data, a_start, joint_free, mu_offset, fit_i=False)
     best = refine(prob_c, prob_c.x_of(a_start, i_base), f"joint refinement, i = {i_base:g}")
     free_i = False
@@ -451,7 +457,6 @@ def _joint_refinement(data, a_fixed, free, a_fit, i_fit, i_base, mu_offset, fit_
         prob_b = _Problem(data, best[2], joint_free, mu_offset, fit_i=True)
         alt = refine(prob_b, prob_b.x_of(best[2], i_base), "joint refinement, i free")
         if alt is not None:
-            dof = max(data.friction_coefficient.size - len(joint_free) - 1, 1)
             F = (best[4] - alt[4]) / max(alt[4] / dof, 1e-300)
             if F > f_dist.ppf(0.95, 1, dof):
                 notes.append(f"joint refinement: i free ({alt[3]:.3g}) fits the bench significantly better than "
@@ -463,12 +468,10 @@ def _joint_refinement(data, a_fixed, free, a_fit, i_fit, i_base, mu_offset, fit_
     if best is None:
         notes.append("joint refinement found no feasible optimum; kept the two-stage fit")
         return None
-    m = data.friction_coefficient.size
     ssr_two_stage = rmse2 ** 2 * m
     if best[4] > ssr_two_stage:
         # the two-stage fit (its i free when ``fit_i``) fits the bench better: kept when i free
         # won there, or when it is significantly better than i at its constant
-        dof = max(m - len(joint_free) - 1, 1)
         F = (best[4] - ssr_two_stage) / max(ssr_two_stage / dof, 1e-300)
         if free_i or (fit_i and F > f_dist.ppf(0.95, 1, dof)):
             notes.append(f"joint refinement (i = {best[3]:.3g}) fits the bench worse than the two-stage fit "
@@ -580,9 +583,7 @@ def fit_friction(bench, base_model: ClutchModel | None = None, mu_offset: float 
     rmse = float(np.sqrt(np.mean((mu_hat - data.friction_coefficient) ** 2)))
     # is the lowest bench slip small against omega_S? (mu at the lowest slip ~ mu_S needs it)
     rows, _ = _low_slip_rows(data, low_slip_max)
-    M = monomials(data.pressure_mpa[rows], data.plate_temperature_c[rows])
-    ws = np.maximum(M @ a_fit[10:15], 1e-6)
-    e_low = np.exp(-np.power(np.abs(data.slip_speed_rad_s[rows]) / ws, i_fit))
+    e_low = _stribeck_factor(data, a_fit, i_fit, rows)
     if float(np.min(e_low)) < 0.9 and not joint:
         notes.append(f"the lowest bench slip is not << omega_S (Stribeck factor down to {np.min(e_low):.2f}): "
                      "the mu_S polynomial is biased toward mu_C; consider the joint refinement (--joint)")
