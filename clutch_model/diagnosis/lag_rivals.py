@@ -39,6 +39,7 @@ from clutch_model.plant.params import ClutchModel
 
 LAG_BOUNDS_S = (2e-3, 2.0)
 LAG_START_RATIOS = (1 / 8, 1 / 3, 1.0, 3.0, 8.0)   # the second time constant over the first, about the named delay
+DELAY_START_RATIOS = (0.5, 0.8, 1.0, 1.25)          # the force delay's starts over the named group delay
 ASYMMETRY_MIN_RATIO = 1.5   # two time constants closer than this are the catalog's one lag
 FORCE_LEVEL_QUANTILES = (0.1, 0.9)   # the forces between which the force-dependent lag's constant moves
 
@@ -206,6 +207,46 @@ class AsymmetricSensorLagObjective(ReadingObjective):
         return asymmetric_lagged_torque(pi.t, plant, pi.run_start, values[0], values[1])
 
 
+@njit(cache=True)
+def delayed_force(t, force, run_start, delay_s):
+    """The force ``delay_s`` late on the rows ``t`` (s): each run's force linear between its
+    rows, read at t - delay_s, its first force before the run's start."""
+    n = force.size
+    out = np.empty(n)
+    start = 0
+    for k in range(n):
+        if k == 0 or run_start[k]:
+            start = k
+        tq = t[k] - delay_s
+        if tq <= t[start]:
+            out[k] = force[start]
+            continue
+        j = k
+        while t[j] > tq:
+            j -= 1
+        if j == k:
+            out[k] = force[k]
+        else:
+            w = (tq - t[j]) / (t[j + 1] - t[j]) if t[j + 1] > t[j] else 1.0
+            out[k] = force[j] + w * (force[j + 1] - force[j])
+    return out
+
+
+class ForceDelayObjective(ForcePathObjective):
+    """A pure delay on the force path: x = [log delay] then the friction correction."""
+
+    def __init__(self, base: ClutchModel, campaign, fit_mask, delay_s: float, noise_sigma_nm: float = 1.0,
+                 ridge_factor: float = 1.0):
+        d = float(np.clip(delay_s, *LAG_BOUNDS_S))
+        super().__init__(base, campaign, fit_mask, [ParamSpec("delay_s", True, LAG_BOUNDS_S[0], LAG_BOUNDS_S[1],
+                                                              np.array([d]))],
+                         noise_sigma_nm=noise_sigma_nm, ridge_factor=ridge_factor)
+
+    def path_force(self, values) -> np.ndarray:
+        pi = self._plant_inputs
+        return delayed_force(pi.t, pi.force, pi.run_start, values[0])
+
+
 @dataclass(frozen=True)
 class LagRival:
     """One rival: its report key, objective, parameter names and how it is told."""
@@ -218,13 +259,28 @@ class LagRival:
 
     def fit(self, base, campaign, fit_mask, delay_s, sigma_nm, max_nfev: int = 40, ridge_factor: float = 1.0):
         obj = self.objective(base, campaign, fit_mask, delay_s, sigma_nm, ridge_factor)
-        fit = _fit_from_best_start(obj, _starts(delay_s), max_nfev, self.key)
+        starts = _starts(delay_s) if len(self.names) == 2 else _delay_starts(delay_s)
+        fit = _fit_from_best_start(obj, starts, max_nfev, self.key)
         fit.parameters = {**fit.parameters, **getattr(obj, "fixed_parameters", {})}
         return fit
 
     def describe(self, fit) -> str:
-        a, b = (1e3 * float(fit.parameters[n]) for n in self.names)
-        return (f"{self.key.replace('_', ' ')} ({a:.3g} ms {self.sides[0]}, {b:.3g} ms {self.sides[1]})")
+        ms = [1e3 * float(fit.parameters[n]) for n in self.names]
+        return f"{self.key.replace('_', ' ')} (" + ", ".join(f"{v:.3g} ms {side}".rstrip()
+                                                              for v, side in zip(ms, self.sides)) + ")"
+
+    def asymmetry_ratio(self, fit) -> float | None:
+        """The larger time constant over the smaller (two-constant rivals), else None."""
+        if len(self.names) != 2:
+            return None
+        a, b = (float(fit.parameters[n]) for n in self.names)
+        return float(max(a, b) / min(a, b))
+
+
+def _delay_starts(delay_s: float) -> list:
+    """Delays about the named mechanisms' group delay (DELAY_START_RATIOS)."""
+    d = float(np.clip(delay_s, 2 * LAG_BOUNDS_S[0], LAG_BOUNDS_S[1] / 2))
+    return [[math.log(d * r)] for r in DELAY_START_RATIOS]
 
 
 RIVALS = (
@@ -235,6 +291,8 @@ RIVALS = (
     LagRival("asymmetric_sensor_lag", AsymmetricSensorLagObjective, ("tau_rise_s", "tau_fall_s"),
              ("as the reading grows", "as it shrinks"),
              "the torque reading lags one way as it grows, another as it shrinks"),
+    LagRival("force_delay", ForceDelayObjective, ("delay_s",), ("",),
+             "the force reaches the pack late by a pure delay, the slip and the reading on time"),
 )
 
 
@@ -253,11 +311,12 @@ def named_or_varying_lag(data, sel, campaign, sigma_nm: float, alpha: float, min
     for rival in RIVALS:
         say(f"{', '.join(timed)} named: checking a {rival.key.replace('_', ' ')} beyond the catalog in its place")
         fit = rival.fit(base, campaign, train, delay_s, sigma_nm, ridge_factor=ridge)
-        a, b = (float(fit.parameters[n]) for n in rival.names)
         out, found = _rival_in_place(data, sel, base, stand_in, fit, rival.describe(fit), rival.key, alpha,
                                      min_gain_frac, say, rival.conclusion)
-        found["asymmetry_ratio"] = float(max(a, b) / min(a, b))
-        if found["took_the_name"] and found["asymmetry_ratio"] < ASYMMETRY_MIN_RATIO:
+        ratio = rival.asymmetry_ratio(fit)
+        if ratio is not None:
+            found["asymmetry_ratio"] = ratio
+        if found["took_the_name"] and ratio is not None and ratio < ASYMMETRY_MIN_RATIO:
             say(f"the two time constants are within {ASYMMETRY_MIN_RATIO:g}x of each other "
                 f"(ratio {found['asymmetry_ratio']:.2f}): the catalog's one lag, not taken")
             found["took_the_name"] = False

@@ -557,3 +557,79 @@ def test_a_force_path_whose_fast_pole_is_below_the_row_resolution_does_not_take_
     for f_n, zeta in ((8.0, 1.5), (5.0, 0.6)):
         monkeypatch.setattr(FD, "fit_second_order", fitted(f_n, zeta))
         assert FD.named_or_force_dynamics(data, sel, None, 1.0, 1e-3, 0.005)[0] == "compared"
+
+
+def test_delayed_force_is_the_force_interpolated_late_in_each_run():
+    """delayed_force against numpy's interpolation run by run on jittered rows (the first
+    force before each run's start)."""
+    from clutch_model.diagnosis.lag_rivals import delayed_force
+
+    rng = np.random.default_rng(3)
+    t = np.concatenate([np.cumsum(rng.uniform(1e-3, 5e-3, 400)), 2.0 + np.cumsum(rng.uniform(1e-3, 5e-3, 300))])
+    force = rng.normal(size=t.size)
+    run_start = np.zeros(t.size, bool)
+    run_start[[0, 400]] = True
+    for d in (0.0, 0.0123, 0.3):
+        want = np.concatenate([np.interp(t[:400] - d, t[:400], force[:400]),
+                               np.interp(t[400:] - d, t[400:], force[400:])])
+        np.testing.assert_allclose(delayed_force(t, force, run_start, d), want, rtol=0, atol=1e-12)
+
+
+def _plant_torque(model, camp, force_delay_s=0.0):
+    from clutch_model.diagnosis.lag_rivals import delayed_force
+    from clutch_model.formats.bag_reader import Campaign
+    from clutch_model.replay import replay_runs
+
+    if force_delay_s:
+        runs = []
+        for r, _ in camp.slices():
+            t = np.asarray(r.t, float)
+            start = np.zeros(t.size, bool)
+            start[0] = True
+            runs.append(replace_run(r, applied_force_n=delayed_force(t, np.asarray(r.applied_force_n, float),
+                                                                     start, force_delay_s)))
+        camp = Campaign(runs)
+    return np.asarray(replay_runs(model, camp).torque_sim, float)
+
+
+def replace_run(run, **kw):
+    from dataclasses import replace
+    return replace(run, **kw)
+
+
+def _read_late(camp, torque, delay_s):
+    """The contract's transport delay: the torque at t - delay, linear, its first value before."""
+    out = np.empty_like(torque)
+    for _, sl in camp.slices():
+        t = np.asarray(camp.t, float)[sl]
+        out[sl] = np.interp(t - delay_s, t, torque[sl])
+    return out
+
+
+def test_a_force_delay_and_a_transport_delay_are_told_apart():
+    """A pure delay on the force (the slip and the reading on time) and the catalog's transport
+    delay (the whole torque read late) are not the same mechanism: on noise-free torque made
+    by either, the force-delay rival (ForceDelayObjective, friction correction refitted) gives
+    a 25 ms force delay back nearly exactly, and the best transport delay on a 1 ms grid leaves
+    several times its error; on a 25 ms transport delay the rival leaves several times the
+    catalog's (exact) error at its best."""
+    from clutch_model.diagnosis.lag_rivals import RIVALS
+    from .noise_free_campaigns import reference_campaign, with_measured_torque
+
+    model, camp = reference_campaign(6, 4, 6.0)
+    every = np.ones(camp.t.size, bool)
+    rival = next(r for r in RIVALS if r.key == "force_delay")
+
+    def rmse(pred, want):
+        return float(np.sqrt(np.mean((np.asarray(pred) - want) ** 2)))
+    plant = _plant_torque(model, camp)
+    # a true force delay
+    forced = _plant_torque(model, camp, 0.025)
+    fit = rival.fit(model, with_measured_torque(camp, forced), every, 0.02, 1.0)
+    assert fit.parameters["delay_s"] == pytest.approx(0.025, rel=0.05)
+    best_transport = min(rmse(_read_late(camp, plant, d), forced) for d in np.arange(0.0, 0.06, 1e-3))
+    assert rmse(fit.predicted, forced) < 0.2 * best_transport
+    # a true transport delay
+    late = _read_late(camp, plant, 0.025)
+    fit = rival.fit(model, with_measured_torque(camp, late), every, 0.025, 1.0)
+    assert rmse(fit.predicted, late) > 3 * rmse(_read_late(camp, plant, 0.025), late) + 0.5
