@@ -89,6 +89,11 @@ Effects outside the catalog (``effects``: [{"name": ..., parameter: value}]):
                           0.02, force_ref_n 6000)  at zero pack force to tau_high_s at force_ref_n
                                      (linear, constant beyond): a valve or motor slowing with the
                                      load; mimics actuator_lag (a force-path effect)
+  actuator_force_delay   delay_s     the pack force is the measured force delay_s late (linear
+                                     between fine rows, the run's first force before it: a
+                                     command or pressure signal on a slow bus); the slip and
+                                     the reading stay on time, so it mimics transport_delay,
+                                     which reads the whole torque late (a force-path effect)
   torque_sensor_resonance  f_n_hz    measured = the torque reading through a second-order
                          (damping 0.3) low-pass of natural frequency f_n_hz and damping (a load
                                      cell or shaft with little damping, or a second-order
@@ -194,6 +199,10 @@ EFFECTS = {
                                                 "first-order lag whose time constant grows linearly from "
                                                 "tau_low_s at zero pack force to tau_high_s at force_ref_n "
                                                 "(a valve or motor slowing with the load)"},
+    "actuator_force_delay": {"kind": "force-path", "parameters": {"delay_s": 0.02},
+                             "mimics": "transport_delay", "catalog_equivalent": None,
+                             "physics": "the pack force is the measured force delay_s late (a pure delay on the "
+                                        "force path): the slip and the torque reading stay on time"},
     "torque_sensor_resonance": {"kind": "measurement", "parameters": {"f_n_hz": 6.0, "damping": 0.3},
                                 "mimics": "torque_sensor_lag", "catalog_equivalent": None,
                                 "physics": "measured = the torque reading through a second-order low-pass "
@@ -661,6 +670,15 @@ def _lowpass_per_run(t, y, run_start, tau_s):
     return out
 
 
+def _delayed_per_run(t, y, run_start, delay_s):
+    """Each run's ``y`` read ``delay_s`` late (linear between rows, its first value before)."""
+    out = np.empty_like(y)
+    starts = list(np.flatnonzero(run_start)) + [y.size]
+    for a, b in zip(starts[:-1], starts[1:]):
+        out[a:b] = np.interp(t[a:b] - delay_s, t[a:b], y[a:b])
+    return out
+
+
 # ---------------------------------------------------------------------------- campaign
 def synthesize_car_logs(spec: CarLogSpec | None = None, base_model: ClutchModel | None = None,
                         progress=None) -> CarLogResult:
@@ -723,6 +741,9 @@ def synthesize_car_logs(spec: CarLogSpec | None = None, base_model: ClutchModel 
         force_pack = _force_dependent_lagged(force_pack, run_start, float(by_force["tau_low_s"]) * spec.fine_rate_hz,
                                              float(by_force["tau_high_s"]) * spec.fine_rate_hz,
                                              float(by_force["force_ref_n"]))
+    late = spec.effect_values("actuator_force_delay")
+    if late is not None:
+        force_pack = _delayed_per_run(t_abs, np.asarray(force_pack, float), run_start, float(late["delay_s"]))
     # what the force sensor logs: the request, or the pack force through the sensor's play
     force_logged = force_all
     sensor_play = spec.effect_values("force_sensor_hysteresis")

@@ -375,6 +375,20 @@ def test_an_asymmetric_actuator_lag_is_not_named_a_catalog_time_mechanism(tmp_pa
     assert check["held_out_rmse"] < 0.5 * check["named_held_out_rmse"], check
 
 
+# A force that reaches the pack 30 ms late by a pure delay (the slip and the reading on time) is
+# outside the catalog, whose transport_delay reads the whole torque late. Under lock-up phases
+# transport_delay was named (held-out t = 166); the force delay fitted in its place (28 ms) beat
+# it head to head at t = 5.1 (diagnosis/lag_rivals.py; an outside generator's 18.3 ms force delay
+# had been named transport_delay at 22.8 ms, 12.8 N*m off the true torque on the unseen runs).
+def test_a_pure_force_delay_is_not_named_a_transport_delay(tmp_path):
+    res, what = _diagnosed(tmp_path, "actuator_force_delay", "lockup", 1, {"actuator_force_delay": 0.03})
+    assert res.verdict == "unexplained", what
+    check = res.report["selection"]["lag_rival_checks"]["force_delay"]
+    assert check["took_the_name"] and check["in_place_of"] == ["transport_delay"], check
+    assert check["parameters"]["delay_s"] == pytest.approx(0.03, rel=0.15), check
+    assert check["held_out_rmse"] < check["named_held_out_rmse"], check
+
+
 # An actuator whose lag grows with the force (20 ms at no force, 137 ms at 6 kN) is outside the
 # catalog: over one 40 s drive the catalog named torque_sensor_lag (78 ms; a wrong name, +45 %
 # on the unseen bag) and every rival in its place lost, fitted on top of the named model's

@@ -410,6 +410,30 @@ def test_actuator_asymmetric_lag_applies_and_releases_at_their_own_time_constant
     assert truth["mimics"] == "actuator_lag" and on.spec.expected_cause == "unexplained"
 
 
+def test_actuator_force_delay_drives_the_plant_with_the_force_read_late():
+    """actuator_force_delay: the plant sees the request delay_s late (linear between fine rows,
+    the first request before the run's start, independent of the generator's own helper: a
+    loop over the rows), the force sensor logs the request on time."""
+    from clutch_model.virtual_car.car_logs import CarLogSpec, synthesize_car_logs
+    delay = 0.0237
+    base = synthesize_car_logs(CarLogSpec(seed=2, n_runs=1))
+    on = synthesize_car_logs(CarLogSpec(seed=2, n_runs=1, effects=[{"name": "actuator_force_delay",
+                                                                    "delay_s": delay}]))
+    fb, fo = base.runs[0].fine, on.runs[0].fine
+    np.testing.assert_array_equal(fo["applied_force_n"], fb["applied_force_n"])
+    t, request = fb["t_s"], fb["applied_force_n"]
+    pack = np.empty_like(request)
+    for k in range(t.size):
+        tq = t[k] - delay
+        j = int(np.searchsorted(t, tq, side="right")) - 1
+        pack[k] = request[0] if j < 0 else (request[j] if j == t.size - 1 else
+                                            request[j] + (tq - t[j]) / (t[j + 1] - t[j]) * (request[j + 1] - request[j]))
+    _assert_plant_driven_by(pack, on, base, rtol=1e-6, atol=1e-3, min_change_rms_nm=5.0)
+    truth = on.truth["effects"][0]
+    assert truth["name"] == "actuator_force_delay" and truth["parameters"] == {"delay_s": delay}
+    assert truth["mimics"] == "transport_delay" and on.spec.expected_cause == "unexplained"
+
+
 def test_actuator_force_dependent_lag_slows_with_the_pack_force():
     """actuator_force_dependent_lag: the plant sees the request through x' = (F - x) / tau(x),
     tau linear from tau_low at 0 N to tau_high at force_ref_n, constant beyond (the request held
