@@ -178,6 +178,21 @@ class ModelFit:
         input noise: on an outside campaign with nothing hidden (torque noise band-limited at
         17 Hz, 2.45 ms rows) a 2 ms torque-sensor lag predicted the held-out data at t = 105
         (innovation variance -57 %, plain mean square -4 %)."""
+        return (self._below_time_resolution() or self._below_force_resolution()
+                or self._below_friction_resolution() or self._below_level_wander())
+
+    @property
+    def below_resolution_alone(self) -> str | None:
+        """Why this fit cannot name its mechanism when that is only for what it leaves: a
+        friction decline too small, or a constant within the residual's slow wander, measure the
+        fit against its own residual, and a second cause fitted with it takes part of that
+        residual. None when the fit is resolved, or when the data themselves cannot resolve it
+        (a time or a force parameter below the rows' resolution)."""
+        if self._below_time_resolution() or self._below_force_resolution():
+            return None
+        return self._below_friction_resolution() or self._below_level_wander()
+
+    def _below_time_resolution(self) -> str | None:
         half_row_s = 0.5 * self.context.row_interval_s
         smooth_s = self.context.slip_smoothing_s
         for mech_id, name, v in self._time_parameters():
@@ -187,7 +202,7 @@ class ModelFit:
             if isinstance(v, (int, float)) and v < smooth_s:
                 return (f"{mech_id} {name} = {1e3 * v:.2g} ms is below the time resolution of the "
                         f"model's inputs (the slip is smoothed with a {1e3 * smooth_s:.3g} ms Gaussian)")
-        return self._below_force_resolution() or self._below_friction_resolution() or self._below_level_wander()
+        return None
 
     def _marked_parameters(self, mark: str):
         """(mechanism id, parameter name, fitted value) of each of this fit's mechanisms whose
