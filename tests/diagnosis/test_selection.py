@@ -156,6 +156,47 @@ def test_two_causes_seen_only_together_are_named(noise, monkeypatch):
     assert sorted(blind.cause_ids) != ["A", "B"]
 
 
+@dataclass
+class _FlaggedFit(LinearFit):
+    below_resolution: str | None = None
+    below_resolution_alone: str | None = None
+
+
+@dataclass
+class UnresolvedAlone(LinearCandidate):
+    """A LinearCandidate whose fit alone (no other term beside it) declares itself below the
+    data's resolution: only for what it leaves (``relative``, as a constant within the slow
+    wander of its own residual) or by the data themselves (as a lag below the row interval)."""
+    relative: bool = True
+
+    def fit(self, train):
+        f = super().fit(train)
+        why = "unresolved alone" if len(f.names) == 1 else None
+        return _FlaggedFit(**vars(f), below_resolution=why, below_resolution_alone=why if self.relative else None)
+
+
+def test_a_pair_each_unresolved_alone_only_for_what_it_leaves_is_named_by_the_look_ahead():
+    """The two causes of the look-ahead test, each unresolved when fitted alone: when that is
+    only for what it leaves, the look-ahead tries one first and both are named, resolved when
+    refitted together; when the data themselves cannot resolve them alone, neither is tried
+    first and the pair is not named."""
+    d, names, X, train, test, cols, eps, groups = _campaign(0, "white")
+    shared = 400.0 * np.sin(2 * np.pi * 1.3 * d["t"] + np.cumsum(d["run_start"]))
+    y = 0.05 * cols["slip_power"] + 0.2 * cols["temperature"] + eps
+    data = _data(y, d, names, X, train, test, groups)
+    for relative in (True, False):
+        cands = [UnresolvedAlone("A", shared + 0.05 * cols["slip_power"], relative=relative),
+                 UnresolvedAlone("B", 0.2 * cols["temperature"] - shared, relative=relative),
+                 LinearCandidate("offset", cols["offset"])]
+        sel = select_causes(data, Zero(), cands, intervals=False)
+        if relative:
+            assert sel.verdict == "named" and sorted(sel.cause_ids) == ["A", "B"], sel.reason
+            assert sel.steps[0].look_ahead
+            assert all(c.fitted.below_resolution is None for c in sel.causes)
+        else:
+            assert sorted(sel.cause_ids) != ["A", "B"], sel.reason
+
+
 def test_lookalike_that_data_cannot_separate_is_unexplained():
     """Two candidates that differ by less than the data resolves: the answer is `unexplained`
     with the closest candidates, not a guess."""
