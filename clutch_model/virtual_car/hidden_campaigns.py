@@ -175,7 +175,8 @@ def _cases() -> dict:
     out += [Case(m, "mechanism", mechanisms=(m,)) for m in CATALOG]
     out += [Case(f"{a}+{b}", "pair", mechanisms=(a, b)) for a, b in
             (("spring_preload", "torque_offset"), ("actuator_lag", "friction_degradation"),
-             ("transport_delay", "drag_torque"), ("actuator_lag", "transport_delay"))]
+             ("transport_delay", "drag_torque"), ("actuator_lag", "transport_delay"),
+             ("torque_offset", "friction_degradation"))]
     out += [Case(e, "lookalike" if EFFECTS[e]["mimics"] else "outside", effects=(e,))
             for e in ("torque_sensor_lowpass", "slip_power_fade", "run_friction_level",
                       "torque_ripple", "pressure_temperature_cross", "actuator_rate_limit",
