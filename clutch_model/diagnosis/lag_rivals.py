@@ -43,7 +43,7 @@ from clutch_model.diagnosis.fitting import time_mechanism_ids
 from clutch_model.diagnosis.force_dynamics import (MAX_SUBSTEP_S, ForcePathObjective, ReadingObjective,
                                                    _fit_from_best_start, _lag_step, _rival_in_place, group_delay_s,
                                                    taken_out)
-from clutch_model.plant.mechanisms import ParamSpec
+from clutch_model.plant.mechanisms import ParamSpec, delay_signal
 from clutch_model.plant.params import ClutchModel
 
 LAG_BOUNDS_S = (2e-3, 2.0)
@@ -168,6 +168,12 @@ def _starts(delay_s: float) -> list:
     return [[math.log(d / math.sqrt(r)), math.log(d * math.sqrt(r))] for r in LAG_START_RATIOS]
 
 
+def _delay_starts(delay_s: float) -> list:
+    """Delays about the named mechanisms' group delay (DELAY_START_RATIOS)."""
+    d = float(np.clip(delay_s, 2 * LAG_BOUNDS_S[0], LAG_BOUNDS_S[1] / 2))
+    return [[math.log(d * r)] for r in DELAY_START_RATIOS]
+
+
 class AsymmetricLagObjective(ForcePathObjective):
     """The asymmetric lag on the force path: x = [log tau_apply, log tau_release] then the
     friction correction."""
@@ -216,31 +222,6 @@ class AsymmetricSensorLagObjective(ReadingObjective):
         return asymmetric_lagged_torque(pi.t, plant, pi.run_start, values[0], values[1])
 
 
-@njit(cache=True)
-def delayed_force(t, force, run_start, delay_s):
-    """The force ``delay_s`` late on the rows ``t`` (s): each run's force linear between its
-    rows, read at t - delay_s, its first force before the run's start."""
-    n = force.size
-    out = np.empty(n)
-    start = 0
-    for k in range(n):
-        if k == 0 or run_start[k]:
-            start = k
-        tq = t[k] - delay_s
-        if tq <= t[start]:
-            out[k] = force[start]
-            continue
-        j = k
-        while t[j] > tq:
-            j -= 1
-        if j == k:
-            out[k] = force[k]
-        else:
-            w = (tq - t[j]) / (t[j + 1] - t[j]) if t[j + 1] > t[j] else 1.0
-            out[k] = force[j] + w * (force[j + 1] - force[j])
-    return out
-
-
 class ForceDelayObjective(ForcePathObjective):
     """A pure delay on the force path: x = [log delay] then the friction correction."""
 
@@ -253,7 +234,7 @@ class ForceDelayObjective(ForcePathObjective):
 
     def path_force(self, values) -> np.ndarray:
         pi = self._plant_inputs
-        return delayed_force(pi.t, pi.force, pi.run_start, values[0])
+        return delay_signal(pi.t, pi.force, pi.run_start, values[0])
 
 
 @dataclass(frozen=True)
@@ -265,11 +246,11 @@ class LagRival:
     names: tuple
     sides: tuple             # what each time constant is for, in the log line
     conclusion: str
+    starts: object = _starts  # the search's starts about the named group delay
 
     def fit(self, base, campaign, fit_mask, delay_s, sigma_nm, max_nfev: int = 40, ridge_factor: float = 1.0):
         obj = self.objective(base, campaign, fit_mask, delay_s, sigma_nm, ridge_factor)
-        starts = _starts(delay_s) if len(self.names) == 2 else _delay_starts(delay_s)
-        fit = _fit_from_best_start(obj, starts, max_nfev, self.key)
+        fit = _fit_from_best_start(obj, self.starts(delay_s), max_nfev, self.key)
         fit.parameters = {**fit.parameters, **getattr(obj, "fixed_parameters", {})}
         return fit
 
@@ -286,12 +267,6 @@ class LagRival:
         return float(max(a, b) / min(a, b))
 
 
-def _delay_starts(delay_s: float) -> list:
-    """Delays about the named mechanisms' group delay (DELAY_START_RATIOS)."""
-    d = float(np.clip(delay_s, 2 * LAG_BOUNDS_S[0], LAG_BOUNDS_S[1] / 2))
-    return [[math.log(d * r)] for r in DELAY_START_RATIOS]
-
-
 RIVALS = (
     LagRival("asymmetric_lag", AsymmetricLagObjective, ("tau_apply_s", "tau_release_s"),
              ("applying", "releasing"), "the force path lags the force one way on applying, another on releasing"),
@@ -301,7 +276,7 @@ RIVALS = (
              ("as the reading grows", "as it shrinks"),
              "the torque reading lags one way as it grows, another as it shrinks"),
     LagRival("force_delay", ForceDelayObjective, ("delay_s",), ("",),
-             "the force reaches the pack late by a pure delay, the slip and the reading on time"),
+             "the force reaches the pack late by a pure delay, the slip and the reading on time", _delay_starts),
 )
 
 

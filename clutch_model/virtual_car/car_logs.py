@@ -123,7 +123,7 @@ from clutch_model.errors import DataError, ParamsError
 from clutch_model.formats.bag_writer import DEFAULT_START_TIME_NS, RunSignals, TopicSeries
 from clutch_model.plant import kernels as K
 from clutch_model.plant import params as P
-from clutch_model.plant.mechanisms import CATALOG, make_mechanism
+from clutch_model.plant.mechanisms import CATALOG, delay_signal, make_mechanism
 from clutch_model.plant.mechanisms.base import run_bounds
 from clutch_model.plant.params import ClutchModel, load_model
 from clutch_model.virtual_car.signals import (Noise, TopicClock, WhiteNoise, make_noise,
@@ -670,15 +670,6 @@ def _lowpass_per_run(t, y, run_start, tau_s):
     return out
 
 
-def _delayed_per_run(t, y, run_start, delay_s):
-    """Each run's ``y`` read ``delay_s`` late (linear between rows, its first value before)."""
-    out = np.empty_like(y)
-    starts = list(np.flatnonzero(run_start)) + [y.size]
-    for a, b in zip(starts[:-1], starts[1:]):
-        out[a:b] = np.interp(t[a:b] - delay_s, t[a:b], y[a:b])
-    return out
-
-
 # ---------------------------------------------------------------------------- campaign
 def synthesize_car_logs(spec: CarLogSpec | None = None, base_model: ClutchModel | None = None,
                         progress=None) -> CarLogResult:
@@ -743,7 +734,7 @@ def synthesize_car_logs(spec: CarLogSpec | None = None, base_model: ClutchModel 
                                              float(by_force["force_ref_n"]))
     late = spec.effect_values("actuator_force_delay")
     if late is not None:
-        force_pack = _delayed_per_run(t_abs, np.asarray(force_pack, float), run_start, float(late["delay_s"]))
+        force_pack = delay_signal(t_abs, force_pack, run_start, float(late["delay_s"]))
     # what the force sensor logs: the request, or the pack force through the sensor's play
     force_logged = force_all
     sensor_play = spec.effect_values("force_sensor_hysteresis")

@@ -559,28 +559,12 @@ def test_a_force_path_whose_fast_pole_is_below_the_row_resolution_does_not_take_
         assert FD.named_or_force_dynamics(data, sel, None, 1.0, 1e-3, 0.005)[0] == "compared"
 
 
-def test_delayed_force_is_the_force_interpolated_late_in_each_run():
-    """delayed_force against numpy's interpolation run by run on jittered rows (the first
-    force before each run's start)."""
-    from clutch_model.diagnosis.lag_rivals import delayed_force
-
-    rng = np.random.default_rng(3)
-    t = np.concatenate([np.cumsum(rng.uniform(1e-3, 5e-3, 400)), 2.0 + np.cumsum(rng.uniform(1e-3, 5e-3, 300))])
-    force = rng.normal(size=t.size)
-    run_start = np.zeros(t.size, bool)
-    run_start[[0, 400]] = True
-    for d in (0.0, 0.0123, 0.3):
-        want = np.concatenate([np.interp(t[:400] - d, t[:400], force[:400]),
-                               np.interp(t[400:] - d, t[400:], force[400:])])
-        np.testing.assert_allclose(delayed_force(t, force, run_start, d), want, rtol=0, atol=1e-12)
-
-
 def _plant_torque(model, camp, force_delay_s=0.0):
     """The model's torque on the campaign, its force ``force_delay_s`` late."""
     from dataclasses import replace
 
-    from clutch_model.diagnosis.lag_rivals import delayed_force
     from clutch_model.formats.bag_reader import Campaign
+    from clutch_model.plant.mechanisms import delay_signal
     from clutch_model.replay import replay_runs
 
     if force_delay_s:
@@ -589,8 +573,7 @@ def _plant_torque(model, camp, force_delay_s=0.0):
             t = np.asarray(r.t, float)
             start = np.zeros(t.size, bool)
             start[0] = True
-            runs.append(replace(r, applied_force_n=delayed_force(t, np.asarray(r.applied_force_n, float),
-                                                                 start, force_delay_s)))
+            runs.append(replace(r, applied_force_n=delay_signal(t, r.applied_force_n, start, force_delay_s)))
         camp = Campaign(runs)
     return np.asarray(replay_runs(model, camp).torque_sim, float)
 
@@ -630,5 +613,9 @@ def test_a_force_delay_and_a_transport_delay_are_told_apart():
     # a true transport delay
     late = _read_late(camp, plant, 0.025)
     fit = rival.fit(model, with_measured_torque(camp, late), every, 0.025, 1.0)
-    assert rmse(_read_late(camp, plant, 0.025), late) < 1e-9
+    run_start = np.zeros(camp.t.size, bool)
+    for _, sl in camp.slices():
+        run_start[sl.start] = True
+    catalog = make_mechanism("transport_delay", delay_s=0.025).apply_to_measurement(camp.t, plant, run_start)
+    assert rmse(catalog, late) < 1e-9
     assert rmse(fit.predicted, late) > 0.5
