@@ -239,6 +239,11 @@ def _below_resolution(fitted) -> str | None:
     return getattr(fitted, "below_resolution", None)
 
 
+def _first_unresolved(causes) -> str | None:
+    """Why the first of ``causes`` whose fit is below the data's resolution is so, else None."""
+    return next((why for why in map(_below_resolution, (c.fitted for c in causes)) if why), None)
+
+
 def _resolved_only_beside(fitted) -> str | None:
     """Why a fitted candidate is unresolved alone when a cause fitted beside it may resolve it
     (``below_resolution_alone``), else None."""
@@ -1058,7 +1063,7 @@ def _look_ahead(data, baseline, resid_base, structured: bool, step1: SelectionSt
             continue
         named, current, pair, st2 = found
         if _below_resolution(first.fitted):
-            coarse = next((why for why in map(_below_resolution, (c.fitted for c in named)) if why), None)
+            coarse = _first_unresolved(named)
             say(f"  {' + '.join(c.id for c in named)} refitted together: held-out t = {pair.t_stat:.1f}"
                 + (f"; {coarse}" if coarse else "; both resolved"))
             if coarse:
@@ -1161,7 +1166,7 @@ def _backfitted_second(data, resid_cur, named, step2: SelectionStep, cand_by_id,
                   Cause(sc.id, sc.fitted, dict(sc.fitted.parameters), {}, None)]
         model = _backfit(data, causes, cand_by_id, sc.fitted)
         pair = _compare(data, resid_cur, residual(data, model), max_order)
-        coarse = next((why for why in map(_below_resolution, (c.fitted for c in causes)) if why), None)
+        coarse = _first_unresolved(causes)
         say(f"  {named[0].id} + {sc.id} refitted together against {named[0].id} alone: held-out t = "
             f"{pair.t_stat:.1f}" + (f"; {coarse}" if coarse else ""))
         if coarse or not pair.significant(alpha / len(tried), min_gain_frac, plain_gain):
