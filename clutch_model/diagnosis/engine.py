@@ -53,6 +53,7 @@ from clutch_model.diagnosis.sump_reading import choose_sump_reading
 from clutch_model.diagnosis.static_friction import fit_static_friction, lock_entry_rows, with_entry_torque
 from clutch_model.diagnosis.slip_acceleration import named_or_slip_acceleration, none_or_slip_acceleration
 from clutch_model.diagnosis.torque_line import none_or_torque_line
+from clutch_model.diagnosis.torque_range import find_torque_rails, without_torque_at_rails
 from clutch_model.diagnosis.bench_anchor import named_and_bench_anchored, none_or_bench_anchored
 from clutch_model.diagnosis.fitting import CANDIDATE_IDS, CandidateFit, fit_candidate, time_mechanism_ids
 from clutch_model.diagnosis.friction_ridge import held_to_the_data
@@ -381,11 +382,16 @@ def _diagnose_reading(nominal: ClutchModel, bench_model: ClutchModel, runs, held
     # -- stage 1: split ---------------------------------------------------------------------
     campaign = runs if isinstance(runs, Campaign) else Campaign(list(runs))
     del runs                      # long logs: the native rows go once regridded / decimated
+    # readings pinned at the torque sensor's range carry no torque (torque_range)
+    rails = find_torque_rails(campaign)
+    if rails.found:
+        say(rails.describe())
+        campaign = without_torque_at_rails(campaign, rails)
     # a torque sensor quieter at high frequencies than the slip noise the model carries into its
     # prediction: the plant is driven by the slip smoothed without phase (input_hold)
     input_noise = decide_input_noise(campaign, nominal)
     say(input_noise.describe())
-    input_info = input_noise.to_dict()
+    input_info = {**input_noise.to_dict(), **rails.to_dict()}
     if input_noise.smoothed:
         campaign = with_smoothed_slip(campaign, input_noise.sigma_s)
     input_info["force_sample_period_s"] = force_sample_period_s(campaign)
@@ -741,7 +747,8 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
     lib_names, lib = residual_library(campaign, sim_cal, calibrated.predicted)
     ctx = CampaignContext(campaign, energy_total, torque_scale, sigma_guess,
                           bench_model if cal_base is not bench_model else None,
-                          slip_smoothing_s=float(inputs.get("sigma_s", 0.0)))   # 0 unless smoothed
+                          slip_smoothing_s=float(inputs.get("sigma_s", 0.0)),   # 0 unless smoothed
+                          force_sample_period_s=float(inputs.get("force_sample_period_s") or 0.0))
     ids = list(candidates) if candidates else diagnosis_candidate_ids()
     data = SelectionData(y=campaign.torque_measured, t=campaign.t, run_start=campaign.run_start,
                          train_mask=fit_mask & scored, test_mask=eval_mask & scored, features=lib,
@@ -925,7 +932,7 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
                        "innovation_variance_cut": found.comparison.gain_frac})
         if discovery.beside:
             # catalog causes named beside the extension (it took the degradation's place among them)
-            causes = _beside_discovered(discovery, causes[0], extended_model, 0.5 * ctx.row_interval_s)
+            causes = _beside_discovered(discovery, causes[0], extended_model, 0.5 * ctx.timing_interval_s)
             cause = causes[0]["id"]
         cause_params = dict(causes[0]["parameters"])
         cause_ci = dict(causes[0]["parameters_ci95"])
@@ -941,7 +948,7 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
             cause = "unexplained"
         else:
             extended_model = extended_fit.model
-            causes = cause_entries(sel.causes, extended_model, 0.5 * ctx.row_interval_s)
+            causes = cause_entries(sel.causes, extended_model, 0.5 * ctx.timing_interval_s)
             cause = sel.causes[0].id
             cause_params = dict(causes[0]["parameters"])
             cause_ci = dict(causes[0]["parameters_ci95"])

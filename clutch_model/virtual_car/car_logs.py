@@ -6,7 +6,9 @@ catalog) through a controller-like drive on a fine internal grid (``fine_rate_hz
 then samples every topic on its own clock (``signals.TopicClock``: rate, phase, jitter,
 stamp quantisation) and adds each sensor's noise (``signals.Noise``: white, AR(1),
 band-limited, held, median-filtered, drifting), the value then logged in the channel's steps
-(``resolution``, e.g. a slip in 0.01 rad/s: a locked clutch's slip reads mostly exact zeros).
+(``resolution``, e.g. a slip in 0.01 rad/s: a locked clutch's slip reads mostly exact zeros)
+and pinned at its sensor's range (``sensor_range``: a share of the campaign's peak, e.g. a
+torque sensor saturating at 0.8 of the peak torque reads +-that beyond it).
 ``write_car_logs`` writes one rosbag2 bag per
 run, the bench table, ``truth.yaml`` (the true model in the parameter-file schema),
 ``truth.json`` (mechanisms, effects, clocks, noise, schedule) and one sidecar
@@ -245,6 +247,8 @@ class CarLogSpec:
     clocks: dict = field(default_factory=dict)      # channel -> TopicClock (defaults above)
     noise: dict = field(default_factory=dict)       # channel -> Noise (defaults above)
     resolution: dict = field(default_factory=dict)  # channel -> the step its value is logged in (0: none)
+    sensor_range: dict = field(default_factory=dict)  # channel -> its sensor's range as a share of the
+    #                                                   campaign's peak |clean value|: the logged value pinned there
     random_phase: bool = True                       # each topic's first sample at U(0, period)
     lockup: bool = True
     slip_sign_changes: bool = False                 # segments may change the slip's sign
@@ -296,6 +300,8 @@ class CarLogSpec:
             extra = set(e) - {"name"} - set(EFFECTS[name]["parameters"])
             need(not extra, f"effect {name}: unknown parameter '{sorted(extra)[0] if extra else ''}'")
         need(0 < self.load_fraction[0] <= self.load_fraction[1] < 1, "load fraction must be in (0, 1)")
+        for ch, share in self.sensor_range.items():
+            need(ch in CHANNELS and 0 < float(share), f"{ch}: bad sensor range")
 
     def effect_values(self, name: str):
         for e in self.effects:
@@ -789,6 +795,10 @@ def synthesize_car_logs(spec: CarLogSpec | None = None, base_model: ClutchModel 
     runs = []
     names = [f"drive_{i:02d}" for i in range(n_runs)] if spec.schedule == "long-drive" else \
         [f"run_{i:02d}" for i in range(n_runs)]
+    # a sensor's range (``sensor_range``): its reading pinned at +-share x the campaign's peak
+    whole = {"applied_force": force_logged, "slip_speed": slip_all, "sump_temperature": sump_all,
+             "measured_torque": sensor, "pack_temperature": plant["pack"]}
+    rails = {ch: float(share) * float(np.max(np.abs(whole[ch]))) for ch, share in spec.sensor_range.items()}
     for i in range(n_runs):
         sl = slice(i * n_fine, (i + 1) * n_fine)
         fine = {"t_s": t_run.copy(), "applied_force_n": force_logged[sl], "slip_speed_rad_s": slip_all[sl],
@@ -811,6 +821,8 @@ def synthesize_car_logs(spec: CarLogSpec | None = None, base_model: ClutchModel 
             var = float(spec.noise[ch].sigma ** 2) if ch in ("sump_temperature", "pack_temperature") else 0.0
             step = float(spec.resolution.get(ch, 0.0) or 0.0)
             logged = clean + noise if step <= 0 else np.round((clean + noise) / step) * step
+            if ch in rails:
+                logged = np.clip(logged, -rails[ch], rails[ch])
             series[ch] = TopicSeries(t_stamp, logged, var)
             truth[ch] = {"t_true_s": t_true, "t_stamp_s": t_stamp, "clean": clean, "noise": noise,
                          "phase_s": clock.phase_s}
@@ -835,6 +847,7 @@ def synthesize_car_logs(spec: CarLogSpec | None = None, base_model: ClutchModel 
         "clocks": {ch: c.to_dict() for ch, c in spec.clocks.items()},
         "noise": {ch: n.to_dict() for ch, n in spec.noise.items()},
         "resolution": {ch: float(q) for ch, q in spec.resolution.items()},
+        "sensor_range": {ch: {"share_of_peak": float(spec.sensor_range[ch]), "rail": rails[ch]} for ch in rails},
         "fine_rate_hz": spec.fine_rate_hz,
         "runs": [{"name": r.name, "start_time_ns": r.start_time_ns, "duration_s": dur,
                   "first_stamp_s": r.first_stamp_s,

@@ -70,6 +70,7 @@ class Condition:
     slip_noise: tuple | None = None
     slip_noise_sigma: float = 0.05
     resolution: dict | None = None      # channel -> the step its value is logged in
+    sensor_range: dict | None = None    # channel -> its sensor's range, a share of the campaign's peak
     lockup: bool = False
     slip_sign_changes: bool = False
     schedule: str = "short-runs"
@@ -84,7 +85,7 @@ class Condition:
             noise["slip_speed"] = make_noise(self.slip_noise[0], self.slip_noise_sigma, **self.slip_noise[1])
         kw = {"schedule": self.schedule, "n_runs": seen + unseen, "run_duration_s": dur,
               "noise": noise, "lockup": self.lockup, "slip_sign_changes": self.slip_sign_changes,
-              "resolution": dict(self.resolution or {})}
+              "resolution": dict(self.resolution or {}), "sensor_range": dict(self.sensor_range or {})}
         if self.clocks == "lab":
             kw.update(clocks=dict(LAB_CLOCKS), random_phase=False)
         elif self.clocks == "gateway":
@@ -124,6 +125,9 @@ CONDITIONS = {c.name: c for c in (
               "lockup", clocks="car", lockup=True,
               slip_noise=("white", {}), slip_noise_sigma=0.004,
               resolution={"slip_speed": 0.01, "measured_torque": 0.5, "applied_force": 10.0}),
+    Condition("clipped", "lock-up phases, topics on their own clocks, the torque sensor saturating at 0.8 of "
+                         "the campaign's peak torque (its reading pinned there beyond it)", "sensor-range",
+              clocks="car", lockup=True, sensor_range={"measured_torque": 0.8}),
     Condition("sign_changes", "the slip changes sign while slipping (crossing 0 in ~0.1 s), topics on "
                               "their own clocks", "slip-sign", clocks="car", slip_sign_changes=True),
     Condition("long_drive", "one long drive in one bag (a later bag held out)", "one-bag",

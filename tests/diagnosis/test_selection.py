@@ -452,6 +452,20 @@ def test_time_parameter_below_the_rows_resolution_is_not_named():
     assert "slip is smoothed" in fit("transport_delay", delay_s=0.0045).below_resolution
     assert fit("torque_sensor_lag", tau_s=0.02).below_resolution is None     # the catalog's visible range
     assert fit("spring_preload", preload_n=1.0).below_resolution is None
+    # the force sampled at 50 Hz, held between its samples: the model is timed to half its 20 ms
+    ctx.slip_smoothing_s = 0.0
+    slow = CampaignContext(Rows(), 0.0, 100.0, 8.0, force_sample_period_s=0.02)
+    assert slow.timing_interval_s == pytest.approx(0.02)
+
+    def slow_fit(mech, **params):
+        return ModelFit(mech, CandidateFit(mech, None, params, np.zeros(10), 1.0), None, slow, np.ones(400, bool))
+
+    assert "applied force's sample interval" in slow_fit("actuator_lag", tau_s=0.0048).below_resolution
+    assert slow_fit("transport_delay", delay_s=0.0171).below_resolution is None
+    assert fit("actuator_lag", tau_s=0.0048).below_resolution is None          # force sampled with the rows
+    # a force sampled faster than the rows leaves the rows' interval the limit
+    fast = CampaignContext(Rows(), 0.0, 100.0, 8.0, force_sample_period_s=0.001)
+    assert fast.timing_interval_s == pytest.approx(0.005)
 
 
 @pytest.mark.parametrize("noise_n", [5.0, 20.0, 60.0])

@@ -519,3 +519,23 @@ def test_synth_help_names_every_effect(capsys):
     text = " ".join(capsys.readouterr().out.split())
     for name in EFFECTS:
         assert name in text, name
+
+
+def test_a_sensor_range_pins_the_logged_reading_at_a_share_of_the_campaign_peak():
+    """sensor_range: the logged torque is the unclipped one wherever it lies within +-share x the
+    campaign's peak noise-free torque, and exactly that limit beyond it; the truth keeps it unclipped."""
+    from clutch_model.virtual_car.car_logs import CarLogSpec, synthesize_car_logs
+    base = synthesize_car_logs(CarLogSpec(seed=5, n_runs=2))
+    on = synthesize_car_logs(CarLogSpec(seed=5, n_runs=2, sensor_range={"measured_torque": 0.7}))
+    rail = 0.7 * max(float(np.max(np.abs(r.fine["sensor_torque_nm"]))) for r in base.runs)
+    assert on.truth["sensor_range"]["measured_torque"]["rail"] == pytest.approx(rail, rel=1e-12)
+    pinned = 0
+    for b, o in zip(base.runs, on.runs):
+        raw, got = b.signals.measured_torque.values, o.signals.measured_torque.values
+        inside = np.abs(raw) <= rail
+        np.testing.assert_array_equal(got[inside], raw[inside])
+        np.testing.assert_array_equal(got[~inside], np.sign(raw[~inside]) * rail)
+        pinned += int((~inside).sum())
+        np.testing.assert_array_equal(o.fine["sensor_torque_nm"], b.fine["sensor_torque_nm"])
+        np.testing.assert_array_equal(o.signals.applied_force.values, b.signals.applied_force.values)
+    assert pinned > 20
