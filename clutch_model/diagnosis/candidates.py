@@ -84,7 +84,7 @@ class CampaignContext:
         Measured on an outside generator's campaign with the force at 50 Hz and the torque at
         500 Hz (rows decimated to 250 Hz), a 17.1 ms transport delay: the delay was named at
         13.5 ms and a 4.8 ms actuator lag beside it (the torque sensor reads the plant between
-        the force samples, a ramp where the held force steps)."""
+        the force samples, a ramp where the held force steps); the lag is not named now."""
         force_s = float(self.force_sample_period_s)
         return max(self.row_interval_s, force_s) if math.isfinite(force_s) else self.row_interval_s
 
