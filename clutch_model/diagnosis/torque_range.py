@@ -9,9 +9,10 @@ at t = 24.5 and the answer read ``unexplained``.
 
 A rail shows in the readings themselves: the campaign's extreme value repeats exactly, sample
 after sample, where a continuous reading (noise on a moving torque) reaches its extreme once.
-Over 60 outside campaigns without a rail, quantised torque readings among them (0.5 and 1 N*m
-steps, 99 % of their readings sharing a value with another), each extreme was read once or
-twice; the clipped campaign read its upper rail 1344 times, 447 in a row.
+Over 101 campaigns of seven outside generators without a rail, quantised torque readings among
+them (0.5 and 1 N*m steps, up to 99.9 % of their readings sharing a value with another), each
+extreme was read at most 4 times (3 in a row, on quantised readings); the clipped campaign read
+its upper rail 1344 times, 447 in a row.
 
 ``find_torque_rails`` looks at each extreme of the measured torque over the whole campaign
 (duplicate messages, the same stamp and value, counted once): it is a rail when at least
