@@ -52,7 +52,7 @@ class TorqueRails:
         values = np.asarray(values, float)
         hit = np.zeros(values.shape, bool)
         for rail in self.rails_nm:
-            hit |= np.abs(values - rail) <= RAIL_TOL * max(abs(rail), 1.0)
+            hit |= _at(values, rail)
         return hit
 
     def describe(self) -> str:
@@ -65,6 +65,11 @@ class TorqueRails:
 
     def to_dict(self) -> dict:
         return {"torque_rails_nm": [float(r) for r in self.rails_nm], "torque_samples_at_rails": int(self.at_rails)}
+
+
+def _at(values: np.ndarray, level: float) -> np.ndarray:
+    """Which of ``values`` sit exactly (RAIL_TOL) on ``level``."""
+    return np.abs(np.asarray(values, float) - level) <= RAIL_TOL * max(abs(level), 1.0)
 
 
 def _readings(run) -> tuple:
@@ -97,8 +102,7 @@ def find_torque_rails(campaign) -> TorqueRails:
     pooled = np.concatenate(values)
     rails, at = [], 0
     for extreme in (float(pooled.min()), float(pooled.max())):
-        tol = RAIL_TOL * max(abs(extreme), 1.0)
-        on = [np.abs(v - extreme) <= tol for v in values]
+        on = [_at(v, extreme) for v in values]
         count = int(sum(o.sum() for o in on))
         if (count >= max(RAIL_MIN_SAMPLES, RAIL_MIN_SHARE * n)
                 and max(_longest_run(o) for o in on) >= RAIL_MIN_RUN and extreme not in rails):

@@ -795,7 +795,8 @@ def synthesize_car_logs(spec: CarLogSpec | None = None, base_model: ClutchModel 
     runs = []
     names = [f"drive_{i:02d}" for i in range(n_runs)] if spec.schedule == "long-drive" else \
         [f"run_{i:02d}" for i in range(n_runs)]
-    # a sensor's range (``sensor_range``): its reading pinned at +-share x the campaign's peak
+    # each channel's noise-free value over the whole campaign, and a sensor's range
+    # (``sensor_range``): its reading pinned at +-share x the campaign's peak of it
     whole = {"applied_force": force_logged, "slip_speed": slip_all, "sump_temperature": sump_all,
              "measured_torque": sensor, "pack_temperature": plant["pack"]}
     rails = {ch: float(share) * float(np.max(np.abs(whole[ch]))) for ch, share in spec.sensor_range.items()}
@@ -806,9 +807,7 @@ def synthesize_car_logs(spec: CarLogSpec | None = None, base_model: ClutchModel 
                 "sensor_torque_nm": sensor[sl], "pack_temperature_c": plant["pack"][sl],
                 "locked": locked[sl], "plant_locked": plant["locked"][sl],
                 "static_capacity_nm": np.where(plant["locked"][sl], plant["torque"][sl], np.nan)}
-        clean_fine = {"applied_force": force_logged[sl], "slip_speed": slip_all[sl],
-                      "sump_temperature": sump_all[sl], "measured_torque": sensor[sl],
-                      "pack_temperature": plant["pack"][sl]}
+        clean_fine = {ch: values[sl] for ch, values in whole.items()}
         chans = [c for c in CHANNELS if c != "pack_temperature" or spec.include_pack_temperature]
         series, truth = {}, {}
         for ch in chans:
