@@ -151,3 +151,41 @@ def test_terms_found_that_leave_structure_are_not_noise(monkeypatch):
             assert "structure remains that the inputs predict" in out.refused
         else:
             assert out.accepted and out.refused == "", out.selection.reason
+
+
+def test_an_extension_worse_than_the_catalog_s_closest_is_not_named(monkeypatch):
+    """Where the catalog's selection ended `unexplained`, its closest causes refused only for a
+    small structure they leave, a discovered extension that predicts the held-out rows worse
+    than they do is not named: the verdict stays `unexplained`, `discovered` reported beside
+    the closest (engine._discovered_or_closest; an outside generator's preload + degradation
+    left 2.76 N*m, the extension found on the calibrated model 12.65). One that predicts better
+    stays named."""
+    from types import SimpleNamespace
+
+    import clutch_model.diagnosis.engine as engine
+    from clutch_model.diagnosis.selection import Selection
+
+    rng = np.random.default_rng(3)
+    test = np.r_[np.zeros(200, bool), np.ones(200, bool)]
+    data = SimpleNamespace(test_mask=test)
+    monkeypatch.setattr(engine, "residual", lambda d, fitted: fitted.resid)
+    noise = rng.standard_normal(400)
+
+    def outcome(scale):
+        found = SimpleNamespace(resid=scale * noise)
+        cause = SimpleNamespace(id="discovered", parameters={"torque:slip_sign": -72.9}, fitted=found)
+        return engine.DiscoveryOutcome(Selection("named", [cause], [], found, None, None, [], {}, "named"), True)
+
+    left = float(np.sqrt(np.mean((2.76 * noise[test]) ** 2)))
+    sel = Selection("unexplained", [], [], None, None, None, ["spring_preload", "friction_degradation"],
+                    {"held_out_rmse": left}, "after spring_preload, friction_degradation structure remains")
+    said = []
+    worse_sel, worse = engine._discovered_or_closest(data, sel, outcome(12.65), said.append)
+    assert not worse.accepted and worse_sel.verdict == "unexplained"
+    assert worse_sel.closest == ["spring_preload", "friction_degradation", "discovered"]
+    assert "worse" in worse.refused and "spring_preload + friction_degradation" in worse.refused and said
+    better_sel, better = engine._discovered_or_closest(data, sel, outcome(2.5), said.append)
+    assert better.accepted and better_sel is sel
+    # nothing came closest in the catalog: nothing to compare with
+    bare = Selection("unexplained", [], [], None, None, None, [], {}, "structure remains")
+    assert engine._discovered_or_closest(data, bare, outcome(12.65), said.append)[1].accepted

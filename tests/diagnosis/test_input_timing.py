@@ -171,12 +171,14 @@ def test_a_force_rate_term_is_read_as_the_force_timing():
     assert not reading_unsettled({})
 
 
-def _diagnosis(causes=(), closest=(), extended=5.0, closest_rmse=None, held_out=("a[0:10]",), inputs=None):
+def _diagnosis(causes=(), closest=(), extended=5.0, closest_rmse=None, held_out=("a[0:10]",), inputs=None,
+              candidates=(), verdict="unexplained"):
     from types import SimpleNamespace
     sel = SimpleNamespace(closest=list(closest),
                           closest_leaves={} if closest_rmse is None else {"held_out_rmse": closest_rmse})
     return SimpleNamespace(causes=[{"id": c} for c in causes], selection=sel, held_out=list(held_out),
-                           rmse={"extended": extended},
+                           rmse={"extended": extended}, candidates=list(candidates),
+                           cause_id=causes[0] if causes else verdict,
                            inputs=inputs if inputs is not None else {"inputs_between_samples": "linear",
                                                                      "held_weight": BETA_HELD_MAX + 3})
 
@@ -197,11 +199,46 @@ def test_the_held_reading_is_tried_only_where_a_time_mechanism_left_it_open():
                                                                                 "held_weight": 1.0}))
 
 
+def test_the_linear_reading_is_tried_where_the_held_weight_may_be_a_delay():
+    """The mirror of the held retry (engine._reading_taken_held): where the data took the held
+    reading by a weight a delay of a few half force periods gives too (0.5 < beta <= the bar),
+    and the diagnosis names a time mechanism, or names nothing with one as its closest candidate
+    or its first step's best, the campaign is diagnosed again read linearly. Not for `none`,
+    nor where the held reading was forced (weight under 0.5), nor above the bar (read linearly
+    already)."""
+    from types import SimpleNamespace
+
+    from clutch_model.diagnosis.engine import _reading_taken_held
+    held = {"inputs_between_samples": "held", "held_weight": 1.7}
+    fit = lambda i, rmse: SimpleNamespace(id=i, held_out_rmse_nm=rmse)   # noqa: E731
+    assert _reading_taken_held(_diagnosis(causes=["transport_delay"], inputs=held))
+    assert _reading_taken_held(_diagnosis(closest=["actuator_lag"], inputs=held))
+    # nothing named, the closest a hysteresis, the best candidate a delay (the 50 Hz force case)
+    assert _reading_taken_held(_diagnosis(closest=["actuator_hysteresis"], inputs=held,
+                                          candidates=[fit("baseline", 9.0), fit("actuator_hysteresis", 8.3),
+                                                      fit("transport_delay", 5.8)]))
+    assert not _reading_taken_held(_diagnosis(closest=["actuator_hysteresis"], inputs=held,
+                                              candidates=[fit("actuator_hysteresis", 5.0), fit("transport_delay", 5.8)]))
+    assert not _reading_taken_held(_diagnosis(causes=["drag_torque"], inputs=held))
+    assert not _reading_taken_held(_diagnosis(closest=["actuator_lag"], inputs=held, verdict="none",
+                                              candidates=[fit("transport_delay", 5.8)]))
+    assert not _reading_taken_held(_diagnosis(inputs=held))
+    assert not _reading_taken_held(_diagnosis(causes=["transport_delay"],
+                                              inputs={"inputs_between_samples": "held", "held_weight": 0.2}))
+    assert not _reading_taken_held(_diagnosis(causes=["transport_delay"],
+                                              inputs={"inputs_between_samples": "linear", "held_weight": 0.1}))
+    assert not _reading_taken_held(_diagnosis(causes=["transport_delay"],
+                                              inputs={"inputs_between_samples": "linear", "held_weight": BETA_HELD_MAX + 3}))
+
+
 def test_the_held_reading_is_kept_only_when_it_names_and_predicts_better():
     """The held reading's diagnosis replaces the linear one's when it names its causes and its
     extended model predicts the same held-out rows 1 % better than the linear one's best (its
     extended model, or what its closest candidate leaves)."""
-    from clutch_model.diagnosis.engine import HELD_READING_GAIN, _held_reading_better
+    from clutch_model.diagnosis.engine import HELD_READING_GAIN, _other_reading_better
+
+    def _held_reading_better(first, second):
+        return _other_reading_better(first, second, "held")
     linear = _diagnosis(closest=["torque_sensor_lag"], extended=31.1, closest_rmse=5.185)
     assert _held_reading_better(linear, _diagnosis(causes=["torque_sensor_lag"], extended=5.014))[0]
     # a gain under the bar, nothing named, or other held-out rows: the linear reading stays
@@ -215,6 +252,33 @@ def test_the_held_reading_is_kept_only_when_it_names_and_predicts_better():
     named = _diagnosis(causes=["actuator_lag"], extended=5.0)
     assert not _held_reading_better(named, _diagnosis(causes=["actuator_lag"], extended=4.99))[0]
     assert _held_reading_better(named, _diagnosis(causes=["actuator_lag"], extended=4.8))[0]
+
+
+def test_a_reading_that_names_what_the_other_left_below_resolution_is_kept_no_worse():
+    """Where the first reading named nothing and came closest to time mechanisms fitted below
+    half the force's sample period (it could not name them), a second reading that names its
+    causes is kept when it predicts the held-out rows no worse, not only 2 % better
+    (engine._other_reading_better, _unresolved_in_time; the virtual car's 17 ms delay under a
+    50 Hz force read held: closest torque_sensor_lag 7 ms, 5.944 N*m left, read linearly the
+    delay named at 5.919)."""
+    from types import SimpleNamespace
+
+    from clutch_model.diagnosis.engine import _other_reading_better
+    fit = lambda i, rmse, **p: SimpleNamespace(id=i, held_out_rmse_nm=rmse, parameters=p)   # noqa: E731
+    held = {"inputs_between_samples": "held", "held_weight": 1.7, "force_sample_period_s": 0.02}
+    first = _diagnosis(closest=["torque_sensor_lag"], extended=8.06, closest_rmse=5.944, inputs=held,
+                       candidates=[fit("torque_sensor_lag", 5.95, tau_s=0.007), fit("transport_delay", 5.96, delay_s=0.0075)])
+    assert _other_reading_better(first, _diagnosis(causes=["transport_delay"], extended=5.919), "linear")[0]
+    assert not _other_reading_better(first, _diagnosis(causes=["transport_delay"], extended=5.96), "linear")[0]
+    assert not _other_reading_better(first, _diagnosis(extended=5.5), "linear")[0]
+    # resolved in time (a 15 ms lag the first reading could have named): the 2 % bar holds
+    resolved = _diagnosis(closest=["torque_sensor_lag"], extended=8.06, closest_rmse=5.944, inputs=held,
+                          candidates=[fit("torque_sensor_lag", 5.95, tau_s=0.015)])
+    assert not _other_reading_better(resolved, _diagnosis(causes=["transport_delay"], extended=5.919), "linear")[0]
+    # the first named its cause: the 2 % bar holds
+    named = _diagnosis(causes=["transport_delay"], extended=5.944, inputs=held,
+                       candidates=[fit("transport_delay", 5.95, delay_s=0.0075)])
+    assert not _other_reading_better(named, _diagnosis(causes=["transport_delay"], extended=5.919), "linear")[0]
 
 
 @pytest.mark.parametrize("held_rmse,kept", [(5.0, True), (5.15, False)])
