@@ -41,6 +41,7 @@ from clutch_model.diagnosis.candidates import CampaignContext, MechanismCandidat
 from clutch_model.diagnosis.input_hold import decide_input_noise, with_midpoint_force, with_smoothed_slip
 from clutch_model.diagnosis.input_timing import (BETA_HELD, BETA_HELD_MAX, choose_input_timing, force_sample_period_s,
                                                  reading_unsettled, with_held_inputs)
+from clutch_model.diagnosis.force_ceiling import named_or_force_ceiling, none_or_force_ceiling
 from clutch_model.diagnosis.lockup import without_locked_torque
 from clutch_model.diagnosis.run_level import within_run_forecast
 from clutch_model.diagnosis.force_dynamics import (named_or_constant_play, named_or_force_dynamics,
@@ -173,6 +174,7 @@ class Diagnosis:
     inputs: dict = field(default_factory=dict)  # the inputs' noise: slip smoothed, noise floor (input_hold.InputNoise)
     force_band_check: dict | None = None  # a named hysteresis against a constant-width play (force_dynamics.py)
     force_offset_check: dict | None = None  # the named causes against a force-sensor offset (force_dynamics.py)
+    force_ceiling_check: dict | None = None  # the named causes (or none) against a ceiling on the pack force (force_ceiling.py)
     torque_line_check: dict | None = None   # nothing named: a torque oscillation following the inputs (torque_line.py)
     lag_rival_checks: dict | None = None  # a named time mechanism against lags of two constants (lag_rivals.py)
     force_path_check: dict | None = None  # a force path beyond the catalog (force_dynamics.py): second-order
@@ -863,6 +865,8 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
     sel, force_band = named_or_constant_play(data, sel, campaign, sigma_guess, ALPHA, NAMED_GAIN_FRAC, say)
     # the named causes against an offset on the measured force (force_dynamics.py)
     sel, force_offset = named_or_force_offset(data, sel, campaign, sigma_guess, ALPHA, NAMED_GAIN_FRAC, say)
+    # and against a ceiling on the pack force (force_ceiling.py)
+    sel, force_ceiling = named_or_force_ceiling(data, sel, campaign, sigma_guess, ALPHA, NAMED_GAIN_FRAC, say)
     timings["force dynamics"] = time.perf_counter() - t0
     # one cause named: a second one the car calibration absorbed beside it (bench_anchor.py)
     t0 = time.perf_counter()
@@ -927,6 +931,7 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
             force_dynamics = {**(force_dynamics or {}), "force_sensor_lag": checks["lag"]}
         force_band = force_band or checks.get("band")
         force_offset = force_offset or checks.get("offset")
+        force_ceiling = force_ceiling or checks.get("ceiling")
         timings["force dynamics"] += time.perf_counter() - t0
 
     # an extension beyond the catalog where the catalog's closest causes predict better
@@ -952,6 +957,9 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
         # and an offset on the measured force
         sel, reads_off = none_or_force_offset(data, sel, campaign, sigma_guess, ALPHA, NAMED_GAIN_FRAC, say)
         force_offset = force_offset or reads_off
+        # and a ceiling on the pack force
+        sel, capped = none_or_force_ceiling(data, sel, campaign, sigma_guess, ALPHA, NAMED_GAIN_FRAC, say)
+        force_ceiling = force_ceiling or capped
         # and a friction that follows the slip's acceleration (slip_acceleration.py)
         sel, slip_accel = none_or_slip_acceleration(data, sel, campaign, sigma_guess, ALPHA, NAMED_GAIN_FRAC, say)
         if slip_accel is not None:
@@ -968,6 +976,8 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
         if sel.verdict == "named" and force_offset is None:
             # a cause named on the bench friction meets the force offset as a named one does
             sel, force_offset = named_or_force_offset(data, sel, campaign, sigma_guess, ALPHA, NAMED_GAIN_FRAC, say)
+        if sel.verdict == "named" and force_ceiling is None:
+            sel, force_ceiling = named_or_force_ceiling(data, sel, campaign, sigma_guess, ALPHA, NAMED_GAIN_FRAC, say)
         timings["bench anchor"] += time.perf_counter() - t0
 
     # still nothing: a torque oscillation whose amplitude follows the inputs, a judder (torque_line.py)
@@ -1046,7 +1056,7 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
                   discovery=discovery, diagnosis_rate=diagnosis_rate, diagnosis_sample=sample_info,
                   inputs=inputs, force_path_check=force_dynamics, force_band_check=force_band,
                   lag_rival_checks=lag_rivals,
-                  force_offset_check=force_offset,
+                  force_offset_check=force_offset, force_ceiling_check=force_ceiling,
                   torque_line_check=torque_line,
                   bench_anchor=bench_anchor, ridged_selection=ridged.to_json() if ridged else None)
     emit("selected", diagnosis=d)
@@ -1225,12 +1235,13 @@ def _discovered_or_force_path(data: SelectionData, sel: Selection, discovery: Di
                               sigma_nm: float, say) -> tuple:
     """A discovered extension named where the catalog named nothing (``none``, or ``unexplained``
     with no candidate taking the name), against the force paths beyond the catalog the none
-    verdict meets (a play, a force sensor's play, an offset on the measured force, a rate limit;
-    force_dynamics.none_or_*), each on the calibrated model with its friction correction
+    verdict meets (a play, a force sensor's play, an offset on the measured force, a ceiling on
+    the pack force, a rate limit; force_dynamics.none_or_*, force_ceiling), each on the calibrated model with its friction correction
     refitted: when one takes the name against the calibrated model and its plain held-out RMSE
     is no larger than the extension's, the extension's friction terms stand in for an error on
     the force path and the verdict is ``unexplained``, the catalog's closest and ``discovered``
-    reported as closest. -> (selection, discovery outcome, the checks by kind: rate, band, offset).
+    reported as closest. -> (selection, discovery outcome, the checks by kind: rate, band, offset,
+    ceiling, lag).
 
     Measured on force_sensor_hysteresis@lab#1 (``--quick``, magnitude seed 20261202: a 337 N
     sensor play): discovery named slip-power terms that cut the held-out RMSE by 17 % and made
@@ -1241,8 +1252,8 @@ def _discovered_or_force_path(data: SelectionData, sel: Selection, discovery: Di
     ext = _compare(data, r_cal, residual(data, found), DEFAULT_MAX_ORDER)
     checks = {}
     for kind, check in (("band", none_or_constant_play), ("band", none_or_sensor_play),
-                        ("offset", none_or_force_offset), ("rate", none_or_rate_limit),
-                        ("lag", none_or_force_sensor_lag)):
+                        ("offset", none_or_force_offset), ("ceiling", none_or_force_ceiling),
+                        ("rate", none_or_rate_limit), ("lag", none_or_force_sensor_lag)):
         rival_sel, rival = check(data, plain, campaign, sigma_nm, ALPHA, NAMED_GAIN_FRAC, say)
         if rival is None:
             continue
