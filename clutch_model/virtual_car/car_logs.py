@@ -96,6 +96,10 @@ Effects outside the catalog (``effects``: [{"name": ..., parameter: value}]):
                                      command or pressure signal on a slow bus); the slip and
                                      the reading stay on time, so it mimics transport_delay,
                                      which reads the whole torque late (a force-path effect)
+  actuator_force_ceiling  share_of_peak  the pack force stops at share_of_peak times the
+                                     campaign's largest requested force while the log passes it
+                                     (a motor current or supply pressure limit); no catalog
+                                     mechanism (a force-path effect)
   torque_sensor_resonance  f_n_hz    measured = the torque reading through a second-order
                          (damping 0.3) low-pass of natural frequency f_n_hz and damping (a load
                                      cell or shaft with little damping, or a second-order
@@ -201,6 +205,10 @@ EFFECTS = {
                                                 "first-order lag whose time constant grows linearly from "
                                                 "tau_low_s at zero pack force to tau_high_s at force_ref_n "
                                                 "(a valve or motor slowing with the load)"},
+    "actuator_force_ceiling": {"kind": "force-path", "parameters": {"share_of_peak": 0.7},
+                               "mimics": None, "catalog_equivalent": None,
+                               "physics": "the pack force is min(F, share_of_peak x the campaign's largest "
+                                          "requested force): a force-limited actuator"},
     "actuator_force_delay": {"kind": "force-path", "parameters": {"delay_s": 0.02},
                              "mimics": "transport_delay", "catalog_equivalent": None,
                              "physics": "the pack force is the measured force delay_s late (a pure delay on the "
@@ -741,6 +749,9 @@ def synthesize_car_logs(spec: CarLogSpec | None = None, base_model: ClutchModel 
     late = spec.effect_values("actuator_force_delay")
     if late is not None:
         force_pack = delay_signal(t_abs, force_pack, run_start, float(late["delay_s"]))
+    capped = spec.effect_values("actuator_force_ceiling")
+    if capped is not None:
+        force_pack = np.minimum(force_pack, float(capped["share_of_peak"]) * float(np.max(force_all)))
     # what the force sensor logs: the request, or the pack force through the sensor's play
     force_logged = force_all
     sensor_play = spec.effect_values("force_sensor_hysteresis")
