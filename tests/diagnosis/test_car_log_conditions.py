@@ -404,6 +404,25 @@ def test_a_pure_force_delay_is_not_named_a_transport_delay(tmp_path):
     assert check["held_out_rmse"] < check["named_held_out_rmse"], check
 
 
+# An actuator whose force stops at a ceiling (64 % of the campaign's largest request) is outside
+# the catalog. On the lab condition the calibration absorbed what it could and the answer was
+# `none` (the unseen runs 77.7 N*m off the true torque); the ceiling fitted on the calibrated
+# model takes the name (force_ceiling.py; an outside generator's 73 % ceiling under a 108 Hz
+# dither had been named torque_sensor_lag).
+def test_a_ceiling_on_the_pack_force_is_found_beyond_the_catalog(tmp_path):
+    share = 0.639
+    res, what = _diagnosed(tmp_path, "actuator_force_ceiling", "lab", 1, {"actuator_force_ceiling": share})
+    assert res.verdict == "unexplained", what
+    check = res.report["selection"]["force_ceiling_check"]
+    assert check["took_the_name"] and check["binding_row_fraction"] > 0.05, check
+    assert check["held_out_rmse"] < 0.6 * check["calibrated_held_out_rmse"], check
+    # the ceiling found is the true one: the share of the campaign's largest request
+    from clutch_model.virtual_car.car_logs import load_truth_sidecar
+    peak = max(float(np.max(load_truth_sidecar(f)["fine_applied_force_n"]))
+               for f in (tmp_path / "campaign" / "truth").glob("*.npz"))
+    assert check["parameters"]["ceiling_n"] == pytest.approx(share * peak, rel=0.05), (peak, check)
+
+
 # An actuator whose lag grows with the force (20 ms at no force, 137 ms at 6 kN) is outside the
 # catalog: over one 40 s drive the catalog named torque_sensor_lag (78 ms; a wrong name, +45 %
 # on the unseen bag) and every rival in its place lost, fitted on top of the named model's
