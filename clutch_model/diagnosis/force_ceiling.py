@@ -25,12 +25,9 @@ import math
 
 import numpy as np
 
-from clutch_model.diagnosis.candidates import FORCE_BAND_NOISE_FACTOR
-from clutch_model.diagnosis.force_dynamics import (ForcePathObjective, _fit_from_best_start, _force_noise_n,
-                                                   _noise_band_n, _none_against, _refused, _rival_in_place,
-                                                   taken_out)
+from clutch_model.diagnosis.force_dynamics import (ForcePathObjective, _fit_from_best_start, _none_against,
+                                                   _rival_in_place, taken_out, unless_rarely_binding)
 from clutch_model.plant.mechanisms import ParamSpec
-from clutch_model.prediction import PlantInputs
 
 CEILING_START_QUANTILES = (0.5, 0.7, 0.85, 0.95)   # starts: the training rows' force at these quantiles
 CEILING_LOW_QUANTILE = 0.2                        # the ceiling's lower bound: the force at this quantile
@@ -79,18 +76,10 @@ def fit_force_ceiling(base, campaign, fit_mask, noise_sigma_nm: float = 1.0, max
 
 
 def _unless_rarely_binding(sel, before, found: dict, campaign, train, ceiling_n: float, say):
-    """A ceiling that holds the force off the measured one (by more than FORCE_BAND_NOISE_FACTOR
-    times the force noise) on under MIN_CEILING_BINDING of the fitted rows never takes the name."""
-    pi = PlantInputs.of(campaign)
-    off = pi.at_rows(np.maximum(pi.force - ceiling_n, 0.0))
-    tol = _noise_band_n(_force_noise_n(before), FORCE_BAND_NOISE_FACTOR)
-    rows = np.asarray(train, bool) & np.isfinite(off)
-    frac = float(np.mean(off[rows] > tol)) if rows.any() else 0.0
-    found["binding_row_fraction"] = frac
-    if frac >= MIN_CEILING_BINDING:
-        return sel, found
-    return _refused(before, found, "rarely_binding", f"the ceiling holds the force off the measured one on "
-                    f"{100 * frac:.2g} % of the fitted rows (under {100 * MIN_CEILING_BINDING:g} %)", say)
+    """A ceiling the force passes (by more than the force noise band) on under
+    MIN_CEILING_BINDING of the fitted rows never takes the name."""
+    return unless_rarely_binding(sel, before, found, campaign, train, lambda pi: ceiling_force(pi.force, ceiling_n),
+                                 MIN_CEILING_BINDING, "the ceiling", say)
 
 
 def named_or_force_ceiling(data, sel, campaign, sigma_nm: float, alpha: float, min_gain_frac: float,

@@ -760,16 +760,26 @@ def _unless_rarely_binding(sel, before, found: dict, campaign, train, rate_n_per
     1.95e5 N/s interpolated) on 6 of 30273 rows, and a 2.03e5 N/s limit, binding there alone,
     predicted the held-out residual at t = 3.7 (8.89 against 9.41 N*m): `unexplained`. A true
     23.5 kN/s limit holds the force off on about a tenth of the rows."""
+    return unless_rarely_binding(sel, before, found, campaign, train,
+                                 lambda pi: rate_limited_force(pi.t, pi.force, pi.run_start, rate_n_per_s),
+                                 MIN_RATE_LIMIT_BINDING, "the rate limit", say)
+
+
+def unless_rarely_binding(sel, before, found: dict, campaign, train, path, min_share: float, what: str, say):
+    """A force path ``path(plant_inputs) -> pack force`` that holds the force off the measured
+    one (by more than FORCE_BAND_NOISE_FACTOR times the force noise, at least 1 N) on under
+    ``min_share`` of the fitted rows ``train`` never takes the name (``before``: the selection as
+    it was); the share is reported as ``binding_row_fraction``."""
     pi = PlantInputs.of(campaign)
-    off = pi.at_rows(np.abs(rate_limited_force(pi.t, pi.force, pi.run_start, rate_n_per_s) - pi.force))
+    off = pi.at_rows(np.abs(path(pi) - pi.force))
     tol = _noise_band_n(_force_noise_n(before), FORCE_BAND_NOISE_FACTOR)
     rows = np.asarray(train, bool) & np.isfinite(off)
     frac = float(np.mean(off[rows] > tol)) if rows.any() else 0.0
     found["binding_row_fraction"] = frac
-    if frac >= MIN_RATE_LIMIT_BINDING:
+    if frac >= min_share:
         return sel, found
-    return _refused(before, found, "rarely_binding", f"the rate limit holds the force off the measured one on "
-                    f"{100 * frac:.2g} % of the fitted rows (under {100 * MIN_RATE_LIMIT_BINDING:g} %)", say)
+    return _refused(before, found, "rarely_binding", f"{what} holds the force off the measured one on "
+                    f"{100 * frac:.2g} % of the fitted rows (under {100 * min_share:g} %)", say)
 
 
 def _force_noise_n(*selections) -> float:

@@ -50,13 +50,14 @@ def test_a_ceiling_at_the_largest_forces_only_is_refused(monkeypatch):
     from types import SimpleNamespace
 
     import clutch_model.diagnosis.force_ceiling as fc
+    import clutch_model.diagnosis.force_dynamics as fd
 
     t = np.linspace(0.0, 10.0, 2001)
     force = 5000.0 + 4000.0 * np.sin(2 * np.pi * 0.3 * t)
     camp = SimpleNamespace(t=t, force=force)
-    monkeypatch.setattr(fc.PlantInputs, "of", staticmethod(lambda c: SimpleNamespace(
+    monkeypatch.setattr(fd.PlantInputs, "of", staticmethod(lambda c: SimpleNamespace(
         force=c.force, at_rows=lambda x: np.asarray(x))))
-    monkeypatch.setattr(fc, "_force_noise_n", lambda *s: 10.0)
+    monkeypatch.setattr(fd, "_force_noise_n", lambda *s: 10.0)
     before, taken = SimpleNamespace(verdict="named"), SimpleNamespace(verdict="unexplained")
     every = np.ones(t.size, bool)
     sel, found = fc._unless_rarely_binding(taken, before, {"took_the_name": True}, camp, every, 8999.0, print)
