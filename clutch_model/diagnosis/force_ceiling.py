@@ -26,7 +26,8 @@ import math
 import numpy as np
 
 from clutch_model.diagnosis.force_dynamics import (ForcePathObjective, _fit_from_best_start, _none_against,
-                                                   _rival_in_place, taken_out, unless_rarely_binding)
+                                                   _rival_in_place, in_place_of_named,
+                                                   unless_rarely_binding)
 from clutch_model.plant.mechanisms import ParamSpec
 
 CEILING_START_QUANTILES = (0.5, 0.7, 0.85, 0.95)   # starts: the training rows' force at these quantiles
@@ -87,11 +88,10 @@ def named_or_force_ceiling(data, sel, campaign, sigma_nm: float, alpha: float, m
     """Named causes checked against a ceiling on the pack force in their place -> (selection,
     what the check found: a dict for the report, or None when there was nothing to check).
     Taking the name (``_rival_in_place``), the answer reads ``unexplained``."""
-    if sel.verdict != "named" or not sel.cause_ids:
+    footing = in_place_of_named(sel)
+    if footing is None:
         return sel, None
-    stand_in, base, ridge = taken_out(sel.final, sel.cause_ids)
-    if not stand_in:
-        return sel, None
+    stand_in, base, ridge = footing
     say(f"{', '.join(sel.cause_ids)} named: checking a ceiling on the pack force beyond the catalog in their place")
     train = np.asarray(data.train_mask, bool)
     fit = fit_force_ceiling(base, campaign, train, noise_sigma_nm=sigma_nm, ridge_factor=ridge)

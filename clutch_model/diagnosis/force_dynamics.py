@@ -101,6 +101,15 @@ def taken_out(final, ids) -> tuple:
             footing.with_mechanisms([m for m in model.mechanisms if m.id not in ids]), ridge)
 
 
+def in_place_of_named(sel):
+    """(stand_in, base, ridge) for a rival in place of every named mechanism (``taken_out``), or
+    None when nothing is named or no named mechanism is in the final model."""
+    if sel.verdict != "named" or not sel.cause_ids:
+        return None
+    stand_in, base, ridge = taken_out(sel.final, sel.cause_ids)
+    return (stand_in, base, ridge) if stand_in else None
+
+
 def _start_f_n_hz(damping: float, delay_s: float) -> float:
     """The natural frequency whose group delay 2 damping / w is ``delay_s``, within the bounds."""
     f_n = 2.0 * damping / (2 * math.pi * max(delay_s, 1e-3))
@@ -604,11 +613,10 @@ def named_or_force_offset(data, sel, campaign, sigma_nm: float, alpha: float, mi
     mechanism and meets the named model head to head on the held-out rows as the other rivals
     do (``_rival_in_place``); on a true preload it can only tie. Taking the name means the
     named causes stand in for an error in the force the model is driven with: ``unexplained``."""
-    if sel.verdict != "named" or not sel.cause_ids:
+    footing = in_place_of_named(sel)
+    if footing is None:
         return sel, None
-    stand_in, base, ridge = taken_out(sel.final, sel.cause_ids)
-    if not stand_in:
-        return sel, None
+    stand_in, base, ridge = footing
     say(f"{', '.join(sel.cause_ids)} named: checking an offset on the measured force beyond the catalog in their place")
     fit = fit_force_offset(base, campaign, np.asarray(data.train_mask, bool), noise_sigma_nm=sigma_nm,
                            ridge_factor=ridge)
