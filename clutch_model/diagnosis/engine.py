@@ -42,6 +42,7 @@ from clutch_model.diagnosis.input_hold import decide_input_noise, with_midpoint_
 from clutch_model.diagnosis.input_timing import (BETA_HELD, BETA_HELD_MAX, choose_input_timing, force_sample_period_s,
                                                  reading_unsettled, with_held_inputs)
 from clutch_model.diagnosis.force_ceiling import named_or_force_ceiling, none_or_force_ceiling
+from clutch_model.diagnosis.sump_offset import named_or_sump_offset, none_or_sump_offset
 from clutch_model.diagnosis.lockup import without_locked_torque
 from clutch_model.diagnosis.run_level import within_run_forecast
 from clutch_model.diagnosis.force_dynamics import (named_or_constant_play, named_or_force_dynamics,
@@ -175,6 +176,7 @@ class Diagnosis:
     force_band_check: dict | None = None  # a named hysteresis against a constant-width play (force_dynamics.py)
     force_offset_check: dict | None = None  # the named causes against a force-sensor offset (force_dynamics.py)
     force_ceiling_check: dict | None = None  # the named causes (or none) against a ceiling on the pack force (force_ceiling.py)
+    sump_offset_check: dict | None = None  # named causes (or none) against a torque offset following the sump (sump_offset.py)
     torque_line_check: dict | None = None   # nothing named: a torque oscillation following the inputs (torque_line.py)
     lag_rival_checks: dict | None = None  # a named time mechanism against lags of two constants (lag_rivals.py)
     force_path_check: dict | None = None  # a force path beyond the catalog (force_dynamics.py): second-order
@@ -867,6 +869,8 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
     sel, force_offset = named_or_force_offset(data, sel, campaign, sigma_guess, ALPHA, NAMED_GAIN_FRAC, say)
     # and against a ceiling on the pack force (force_ceiling.py)
     sel, force_ceiling = named_or_force_ceiling(data, sel, campaign, sigma_guess, ALPHA, NAMED_GAIN_FRAC, say)
+    # and against a torque reading offset that follows the sump temperature (sump_offset.py)
+    sel, sump_offset = named_or_sump_offset(data, sel, campaign, sigma_guess, ALPHA, NAMED_GAIN_FRAC, say)
     timings["force dynamics"] = time.perf_counter() - t0
     # one cause named: a second one the car calibration absorbed beside it (bench_anchor.py)
     t0 = time.perf_counter()
@@ -960,6 +964,9 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
         # and a ceiling on the pack force
         sel, capped = none_or_force_ceiling(data, sel, campaign, sigma_guess, ALPHA, NAMED_GAIN_FRAC, say)
         force_ceiling = force_ceiling or capped
+        # and a torque reading offset that follows the sump temperature (sump_offset.py)
+        sel, sump_none = none_or_sump_offset(data, sel, campaign, sigma_guess, ALPHA, NAMED_GAIN_FRAC, say)
+        sump_offset = sump_offset or sump_none
         # and a friction that follows the slip's acceleration (slip_acceleration.py)
         sel, slip_accel = none_or_slip_acceleration(data, sel, campaign, sigma_guess, ALPHA, NAMED_GAIN_FRAC, say)
         if slip_accel is not None:
@@ -1057,6 +1064,7 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
                   inputs=inputs, force_path_check=force_dynamics, force_band_check=force_band,
                   lag_rival_checks=lag_rivals,
                   force_offset_check=force_offset, force_ceiling_check=force_ceiling,
+                  sump_offset_check=sump_offset,
                   torque_line_check=torque_line,
                   bench_anchor=bench_anchor, ridged_selection=ridged.to_json() if ridged else None)
     emit("selected", diagnosis=d)

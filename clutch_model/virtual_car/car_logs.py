@@ -36,6 +36,9 @@ Effects outside the catalog (``effects``: [{"name": ..., parameter: value}]):
                                      (post-processing, a measurement effect); mimics
                                      actuator_lag (it *is* the catalog's torque_sensor_lag when
                                      the catalog knows that id)
+  torque_sensor_thermal_offset  slope_nm_per_c  measured + slope·(θ_sump − 60 °C): a sensor zero
+                                     that moves with the oil's temperature; mimics torque_offset,
+                                     its constant part (a measurement effect)
   torque_ripple          amplitude   transmitted torque × (1 + A·sin(order·φ + φ0)), φ = ∫ω dt
                          (order 1)   per run: once-per-revolution runout
   slip_power_fade        k_per_kw    μ_f / (1 + k·P̄/1 kW), P̄ = slip power through a first-order
@@ -143,6 +146,10 @@ EFFECTS = {
                               "mimics": "actuator_lag", "catalog_equivalent": "torque_sensor_lag",
                               "physics": "torque sensor / bus averaging band-limits the reading: "
                                          "first-order low-pass of the transmitted torque"},
+    "torque_sensor_thermal_offset": {"kind": "measurement", "parameters": {"slope_nm_per_c": 0.4},
+                                     "mimics": "torque_offset", "catalog_equivalent": None,
+                                     "physics": "measured = reading + slope_nm_per_c x (sump - 60 C): the "
+                                                "sensor's zero moves with the oil's temperature"},
     "torque_ripple": {"kind": "plant-torque", "parameters": {"amplitude": 0.06, "order": 1.0},
                       "mimics": None, "catalog_equivalent": None,
                       "physics": "once-per-revolution runout: torque x (1 + A sin(order phi + phi0)), "
@@ -797,6 +804,9 @@ def synthesize_car_logs(spec: CarLogSpec | None = None, base_model: ClutchModel 
     if resonance is not None:
         sensor = _second_order_per_run(np.asarray(sensor, float), run_start, float(resonance["f_n_hz"]),
                                        float(resonance["damping"]), 1.0 / spec.fine_rate_hz)
+    thermal = spec.effect_values("torque_sensor_thermal_offset")
+    if thermal is not None:
+        sensor = sensor + float(thermal["slope_nm_per_c"]) * (np.asarray(sump_all, float) - 60.0)
     asym_sensor = spec.effect_values("torque_sensor_asymmetric_lag")
     if asym_sensor is not None:
         sensor = _asymmetric_sensor(np.ascontiguousarray(sensor, float), run_start,

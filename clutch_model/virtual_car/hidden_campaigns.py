@@ -162,6 +162,7 @@ EFFECT_RANGES = {"torque_sensor_lowpass": ("tau_s", (0.02, 0.15)),
                  "force_sensor_lag": ("tau_s", (0.04, 0.12)),
                  "actuator_force_delay": ("delay_s", (0.015, 0.05)),
                  "actuator_force_ceiling": ("share_of_peak", (0.6, 0.8)),
+                 "torque_sensor_thermal_offset": ("slope_nm_per_c", (0.3, 0.8)),
                  "slip_acceleration_friction": ("gain_s2_per_rad", (0.004, 0.012))}
 
 
@@ -189,7 +190,8 @@ def _cases() -> dict:
                       "actuator_asymmetric_lag", "actuator_force_dependent_lag",
                       "torque_sensor_asymmetric_lag", "slip_acceleration_friction",
                       "force_sensor_hysteresis", "torque_judder", "torque_sensor_resonance",
-                      "force_sensor_lag", "actuator_force_delay", "actuator_force_ceiling")]
+                      "force_sensor_lag", "actuator_force_delay", "actuator_force_ceiling",
+                      "torque_sensor_thermal_offset")]
     return {c.name: c for c in out}
 
 

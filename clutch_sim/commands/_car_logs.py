@@ -27,7 +27,7 @@ def add_car_logs_options(p) -> None:
                         "force_sensor_offset, actuator_asymmetric_lag, actuator_force_dependent_lag, "
                         "torque_sensor_asymmetric_lag, slip_acceleration_friction, force_sensor_hysteresis, "
                         "torque_judder, torque_sensor_resonance, force_sensor_lag, actuator_force_delay, "
-                        "actuator_force_ceiling")
+                        "actuator_force_ceiling, torque_sensor_thermal_offset")
     g.add_argument("--torque-noise-model", default=None, metavar="SPEC",
                    help="torque sensor noise class, e.g. ar1:sigma=8,phi=0.95 | lowpass:sigma=8,cutoff_hz=10 | "
                         "held:sigma=8,update_hz=10 | median:sigma=8,window=5 | drift:sigma=8,drift=10,tau_s=20 "
