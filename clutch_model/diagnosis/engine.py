@@ -175,8 +175,8 @@ class Diagnosis:
     inputs: dict = field(default_factory=dict)  # the inputs' noise: slip smoothed, noise floor (input_hold.InputNoise)
     force_band_check: dict | None = None  # a named hysteresis against a constant-width play (force_dynamics.py)
     force_offset_check: dict | None = None  # the named causes against a force-sensor offset (force_dynamics.py)
-    force_ceiling_check: dict | None = None  # the named causes (or none) against a ceiling on the pack force (force_ceiling.py)
-    sump_offset_check: dict | None = None  # named causes (or none) against a torque offset following the sump (sump_offset.py)
+    force_ceiling_check: dict | None = None  # named causes (or none) against a pack force ceiling (force_ceiling.py)
+    sump_offset_check: dict | None = None  # named causes (or none) against a sump-following offset (sump_offset.py)
     torque_line_check: dict | None = None   # nothing named: a torque oscillation following the inputs (torque_line.py)
     lag_rival_checks: dict | None = None  # a named time mechanism against lags of two constants (lag_rivals.py)
     force_path_check: dict | None = None  # a force path beyond the catalog (force_dynamics.py): second-order
@@ -309,7 +309,8 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
     say(f"inputs: the reading between samples was {why_tried}; diagnosing again with the inputs "
         + ("held between their samples" if other == "held" else "read linearly between their samples"))
     stages = []
-    second = _diagnose_reading(nominal, bench_model, campaign, checkpoint=lambda stage, **out: stages.append((stage, out)),
+    second = _diagnose_reading(nominal, bench_model, campaign,
+                               checkpoint=lambda stage, **out: stages.append((stage, out)),
                                input_reading=other, **kw)
     better, why = _other_reading_better(first, second, other)
     say(f"inputs: {why}")
@@ -421,10 +422,10 @@ def _diagnose_reading(nominal: ClutchModel, bench_model: ClutchModel, runs, held
                       checkpoint=None, measured_time=None, discover=True, diagnosis_rate_hz=None,
                       fit_executor=None, sample_budget_s=SAMPLE_BUDGET_S, input_reading=None) -> Diagnosis:
     """Diagnose a campaign given the bench-fitted model. ``input_reading``: "held" reads the
-    inputs held between their samples, "linear" linearly, whatever the data say (``diagnose_campaign``). ``measured_time`` (default: when the
-    torque and force topics are not aligned) compares model and measurement at the measured
-    torque's own stamps (``measured_time_campaign``) instead of the replay grid.
-    ``calibrate(model, fit_campaign)`` may
+    inputs held between their samples, "linear" linearly, whatever the data say
+    (``diagnose_campaign``). ``measured_time`` (default: when the torque and force topics are not
+    aligned) compares model and measurement at the measured torque's own stamps
+    (``measured_time_campaign``) instead of the replay grid. ``calibrate(model, fit_campaign)`` may
     add a car-data calibration (regression + Monte Carlo) before the shared friction
     correction; it returns (model, info). ``held_out``: report labels ("bag" or
     "bag[t0:t1]") to hold out instead of the automatic split. ``checkpoint(stage, **outputs)``
@@ -1244,8 +1245,8 @@ def _discovered_or_force_path(data: SelectionData, sel: Selection, discovery: Di
     """A discovered extension named where the catalog named nothing (``none``, or ``unexplained``
     with no candidate taking the name), against the force paths beyond the catalog the none
     verdict meets (a play, a force sensor's play, an offset on the measured force, a ceiling on
-    the pack force, a rate limit; force_dynamics.none_or_*, force_ceiling), each on the calibrated model with its friction correction
-    refitted: when one takes the name against the calibrated model and its plain held-out RMSE
+    the pack force, a rate limit; force_dynamics.none_or_*, force_ceiling), each on the
+    calibrated model with its friction correction refitted: when one takes the name against the calibrated model and its plain held-out RMSE
     is no larger than the extension's, the extension's friction terms stand in for an error on
     the force path and the verdict is ``unexplained``, the catalog's closest and ``discovered``
     reported as closest. -> (selection, discovery outcome, the checks by kind: rate, band, offset,

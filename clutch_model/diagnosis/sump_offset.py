@@ -32,7 +32,8 @@ OFFSET_BOUNDS_NM = (-500.0, 500.0)
 SLOPE_BOUNDS_NM_PER_C = (-20.0, 20.0)
 STARTS = ((0.0, 0.0), (5.0, 0.3), (-5.0, -0.3))
 MIN_SUMP_SPAN_C = 5.0      # a slope is only fitted where the training rows' sump spans this much
-MIN_PLAIN_CUT = 0.5        # ... and takes the name only when it halves the calibrated model's plain held-out mean square
+MIN_PLAIN_CUT = 0.5        # ... and takes the name from `none` only when it halves the calibrated
+#                            model's plain held-out mean square
 
 
 class SumpOffsetObjective(ReadingObjective):
