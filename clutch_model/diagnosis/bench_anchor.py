@@ -84,6 +84,7 @@ def _bench_alone(ctx, bench_base, mask):
 
 
 LEVEL_BOUNDS = (-0.05, 0.05)   # the shift of mu_C and mu_S a friction level may take
+LEVEL_CALIBRATED = 0.004       # a shift of mu up to this is the car calibration's (_far_gap_unexplained)
 
 
 class _LevelObjective(CampaignObjective):
@@ -243,7 +244,8 @@ def none_or_bench_anchored(data, sel, ctx, candidate_ids, alpha: float, min_gain
         check.tries(cid, fitted, f"{cid} on the bench friction", say)
     best, untold = check.chosen()
     if best is None:
-        return _far_gap_unexplained(sel, check, say), check.found
+        return _far_gap_unexplained(sel, check, say, level_of=lambda: _level_leaves(check, bench_base, ctx, train, say)), \
+            check.found
     cid, fitted, vs_bench = best
     if untold is not None:
         why = (f"{sel.reason}; but the calibration absorbed a discrepancy with the bench's friction "
@@ -271,14 +273,50 @@ def none_or_bench_anchored(data, sel, ctx, candidate_ids, alpha: float, min_gain
     return named, check.found
 
 
-def _far_gap_unexplained(sel, check: _Check, say):
+def _level_leaves(check: _Check, bench_base, ctx, train, say) -> tuple:
+    """The bench friction moved by one constant (``fit_friction_level``) against the calibrated
+    model on the held-out rows -> (what it leaves, by the gap's measure ``_excess_frac``; the
+    shift); its figures go to ``check.found["friction_level"]``."""
+    from clutch_model.diagnosis.selection import residual
+
+    level = fit_friction_level(bench_base, ctx, train)
+    vs_cal = check.compare(residual(check.data, level), check.r_cal)
+    left = _excess_frac(vs_cal)
+    check.found["friction_level"] = {"shift": level.parameters["shift"], "held_out_rmse": float(vs_cal.rmse_null),
+                                     "gap_left_frac": float(left)}
+    say(f"  the bench friction moved by a constant ({level.parameters['shift']:+.4f} in mu): held-out RMSE "
+        f"{vs_cal.rmse_null:.2f} N*m against {vs_cal.rmse_alt:.2f} calibrated")
+    return left, float(level.parameters["shift"])
+
+
+def _far_gap_unexplained(sel, check: _Check, say, level_of=None):
     """No mechanism on the bench friction accounts for an absorbed gap: ``sel`` itself (``none``)
     when the gap is within what the bench fit's own extrapolation to the car gives
-    (``BENCH_GAP_FAR``), else ``unexplained`` with the mechanism that closed most of it as the
-    closest candidate (module doc)."""
+    (``BENCH_GAP_FAR``), or when the bench friction moved by one small constant brings it
+    within that (``level_of()``: a shift of mu_C and mu_S of at most LEVEL_CALIBRATED, after
+    which the gap's measure is under BENCH_GAP_FAR: the bench fit's own extrapolation, set a
+    little off the car's level, which is what the car calibration is for), else ``unexplained``
+    with the mechanism that closed most of it as the closest candidate (module doc).
+
+    The gap's measure is relative to the calibrated mean square, and on very clean data the
+    bench fit's extrapolation alone goes far beyond 11 times. Measured on an outside
+    generator's campaign with nothing hidden (torque noise 0.53 N*m, a driveline oscillation on
+    the slip): the bench friction was 4.87 N*m off on the held-out rows against 0.59
+    calibrated (68 times) and the answer read `unexplained`; moved by -0.0021 it is 0.93 N*m
+    off (2.5 times). A force sensor reading 4 % high on the same drive (torque noise 1.2 N*m) is
+    the same gap in kind (99 times; no mechanism closes more than 48 %), the calibration having
+    taken it into the friction level: the level moved by -0.0077 leaves 1.23 times, and it
+    stays `unexplained` by the size of that shift."""
     gap_frac = check.found["gap_frac"]
     if gap_frac < BENCH_GAP_FAR:
         return sel
+    if level_of is not None:
+        left, shift = level_of()
+        if left < BENCH_GAP_FAR and abs(shift) <= LEVEL_CALIBRATED:
+            check.found["a_friction_level"] = True
+            say(f"the bench friction moved by {shift:+.4f} leaves no far gap: the bench fit's own reach, "
+                f"which the calibration takes")
+            return sel
     tried = check.found["mechanisms"]
     closest = max(tried, key=lambda cid: tried[cid]["gap_closed"]) if tried else None
     closest_text = (f"; the closest, {closest} on the bench friction, closes {tried[closest]['gap_closed']:.0%} of it "

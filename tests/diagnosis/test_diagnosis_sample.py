@@ -201,3 +201,74 @@ def test_given_held_out_spans_apply_to_the_windows_row_by_row():
     assert not (fit & expect).any()                      # nothing given is fitted
     # only the guard (0.25 s after each change between held-out and fitted rows) is neither
     assert (~held & ~fit).sum() < 0.05 * sample.t.size
+
+
+# --- windows started again from the states of the model a first diagnosis came to ----------
+
+def _restart_case(causes=(), verdict="named", best_significant=True, sampled=True, extended=5.0,
+                  mechanisms=("spring_preload",), held_out=("run_000[25:35]",)):
+    from types import SimpleNamespace
+
+    from clutch_model.plant.params import load_model
+
+    from clutch_model.plant.mechanisms import make_mechanism
+
+    values = {"spring_preload": {"preload_n": 300.0}, "torque_offset": {"offset_nm": 2.0}}
+    model = load_model(None).with_mechanisms([make_mechanism(m, **values[m]) for m in mechanisms])
+    best = SimpleNamespace(significant=best_significant, fitted=SimpleNamespace(model=model))
+    sel = SimpleNamespace(causes=list(causes), verdict=verdict, final=SimpleNamespace(model=model),
+                          steps=[SimpleNamespace(scores=[best])], closest=[], closest_leaves={})
+    return SimpleNamespace(causes=[{"id": c} for c in causes], selection=sel, held_out=list(held_out),
+                           rmse={"extended": extended}, diagnosis_sample={"sampled": sampled}, inputs={},
+                           candidates=[], cause_id=causes[0] if causes else verdict)
+
+
+def test_the_windows_start_again_only_from_a_plant_cause_of_a_sampled_diagnosis():
+    """engine._window_state_model: a sampled diagnosis naming a cause on the plant's paths, or
+    ending unexplained with its first step's best candidate significant and on the plant; never a
+    `none`, a measurement mechanism alone, a whole-campaign diagnosis or a second restart."""
+    from clutch_model.diagnosis.engine import _window_state_model
+
+    model, ids = _window_state_model(_restart_case(causes=["spring_preload"]))
+    assert ids == ["spring_preload"] and [m.id for m in model.mechanisms] == ["spring_preload"]
+    assert _window_state_model(_restart_case(verdict="unexplained")) is not None
+    assert _window_state_model(_restart_case(verdict="unexplained", best_significant=False)) is None
+    assert _window_state_model(_restart_case(verdict="none")) is None
+    assert _window_state_model(_restart_case(causes=["torque_offset"], mechanisms=("torque_offset",))) is None
+    assert _window_state_model(_restart_case(causes=["spring_preload"], sampled=False)) is None
+    again = _restart_case(causes=["spring_preload"])
+    again.diagnosis_sample["restarted_from"] = ["spring_preload"]
+    assert _window_state_model(again) is None
+
+
+@pytest.mark.parametrize("restarted_rmse,kept", [(4.0, True), (4.95, False)])
+def test_the_restarted_diagnosis_is_kept_only_when_it_predicts_the_held_out_rows_better(monkeypatch, restarted_rmse,
+                                                                                        kept):
+    """diagnose_campaign: the second diagnosis (windows from the first one's model) is kept when
+    it names its causes and predicts the same held-out rows 2 % better; its stages then reach the
+    writer after the first one's, else the first one's report is written again."""
+    import clutch_model.diagnosis.engine as engine
+
+    first = _restart_case(verdict="unexplained", extended=5.0)
+    second = _restart_case(causes=["spring_preload"], extended=restarted_rmse)
+    calls = []
+
+    def fake(nominal, bench_model, campaign, checkpoint=None, window_states=None, **kw):
+        calls.append(None if window_states is None else window_states[1])
+        d = first if window_states is None else second
+        checkpoint("selected", diagnosis=d)
+        return d
+
+    from clutch_model.formats.bag_reader import Campaign, Run
+
+    monkeypatch.setattr(engine, "_diagnose_readings", fake)
+    t = np.arange(0.0, 1.0, 0.005)
+    run = Run("run_000", t, np.full(t.size, 3000.0), np.full(t.size, 5.0), np.full(t.size, 60.0),
+              torque_measured_nm=np.full(t.size, 100.0))
+    written = []
+    got = engine.diagnose_campaign(None, None, Campaign([run]), checkpoint=lambda stage, **out: written.append(out["diagnosis"]))
+    assert calls == [None, ["spring_preload"]]
+    assert got is (second if kept else first)
+    assert got.diagnosis_sample["restarted_from"] == ["spring_preload"]
+    assert got.diagnosis_sample["restart_kept"] is kept
+    assert written == ([first, second] if kept else [first, first])

@@ -91,12 +91,13 @@ def test_high_frequency_noise_of_the_noise_classes():
     assert high_frequency_noise([smooth + white], typical=True) == pytest.approx(8.0, rel=0.05)
 
 
-def _campaign(torque_noise, seed=5):
+def _campaign(torque_noise, seed=5, slip_noise=0.05, torsion=0.0):
     from clutch_model.formats.bag_reader import Campaign, Run
 
     rng = np.random.default_rng(seed)
     t = np.arange(0.0, 20.0, 0.005)
-    slip = np.where((t > 8) & (t < 11), 0.0, 5.0 + 3.0 * np.sin(2 * np.pi * 0.2 * t)) + rng.normal(0.0, 0.05, t.size)
+    slip = np.where((t > 8) & (t < 11), 0.0, 5.0 + 3.0 * np.sin(2 * np.pi * 0.2 * t)
+                    + torsion * np.sin(2 * np.pi * 11.0 * t)) + rng.normal(0.0, slip_noise, t.size)
     force = 4000.0 + 2000.0 * np.sin(2 * np.pi * 0.3 * t)
     torque = 0.05 * force + torque_noise(rng, t.size)
     run = Run("r", t, force, slip, np.full(t.size, 60.0), torque_measured_nm=torque,
@@ -141,3 +142,30 @@ def test_slip_smoothed_only_under_a_quiet_torque_sensor_and_logged_slip_kept_for
     assert seen.noise_sigma_rad_s == raw.noise_sigma_rad_s
     assert np.array_equal(seen.at(t), raw.at(t))
     assert raw.at(t)[(t > 8.5) & (t < 10.5)].all()
+
+
+def test_the_slip_is_not_smoothed_where_the_smoothing_would_take_its_own_motion():
+    """The quiet torque sensor of the test above, the slip carrying an 11 Hz driveline
+    oscillation of 2 rad/s over a sensor noise of 0.015 rad/s: the 5 ms Gaussian would take
+    12 % of the oscillation (its gain exp(-2 pi^2 sigma^2 f^2) = 0.94 at 11 Hz; about 0.1 rad/s
+    typical), several times the noise, so the slip stays as logged. On the white slip noise of
+    0.05 rad/s alone it takes 0.70 of the noise (x - g * x for white x: variance
+    1 - 2 g_0 + sum g^2, with the kernel's centre weight g_0 = dt / (sigma sqrt(2 pi)) = 0.40
+    and sum g^2 = 1 / (2 sqrt(pi) sigma / dt) = 0.28: 0.48, sd 0.70), and the slip is smoothed."""
+    from scipy.signal import butter, sosfilt
+
+    from clutch_model.diagnosis.input_hold import SMOOTHING_SIGNAL_RATIO, decide_input_noise
+    from clutch_model.plant.params import load_model
+
+    model = load_model(None)
+    band = butter(4, 5.0, fs=200.0, output="sos")
+    quiet = lambda rng, n: 8.0 * sosfilt(band, rng.normal(0.0, 3.0, n))   # noqa: E731
+    plain, _ = _campaign(quiet)
+    decision = decide_input_noise(plain, model)
+    assert decision.smoothed
+    assert decision.smoothing_removes_rad_s == pytest.approx(0.70 * 0.05, rel=0.1)
+    oscillating, _ = _campaign(quiet, slip_noise=0.015, torsion=2.0)
+    decision = decide_input_noise(oscillating, model)
+    assert decision.smoothing_removes_rad_s > 3 * SMOOTHING_SIGNAL_RATIO * decision.slip_noise_hf_rad_s
+    assert not decision.smoothed, decision.to_dict()
+    assert decision.to_dict()["slip_smoothing_removes_rad_s"] == decision.smoothing_removes_rad_s
