@@ -291,8 +291,9 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
     windows (diagnosis.sample) starts each window from the plant state of the calibrated
     model's simulation of the whole campaign; where the diagnosis names a cause on the plant's
     paths, or comes closest to one, the campaign is diagnosed again with the windows started
-    from the states of that model (``_window_state_model``), kept when it names its causes and
-    predicts the same held-out rows better by ``HELD_READING_GAIN`` (``_restarted_better``)."""
+    from the states of that model (``_window_state_model``; the inputs read as the first
+    diagnosis settled them), kept when it names its causes and predicts the same held-out rows
+    better by ``HELD_READING_GAIN`` (``_restarted_better``)."""
     kw = dict(held_out=held_out, candidates=candidates, calibrate=calibrate, progress=progress,
               bench_info=bench_info, measured_time=measured_time, discover=discover,
               diagnosis_rate_hz=diagnosis_rate_hz, fit_executor=fit_executor, sample_budget_s=sample_budget_s)
@@ -306,10 +307,17 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
     say = progress or (lambda msg: None)
     say(f"windows: started from the calibrated model's states; diagnosing again with them started from "
         f"the states of the model with {' + '.join(ids)}")
+    # the inputs read as the first diagnosis settled them (no second try of the other reading)
+    inputs = first.inputs or {}
+    reading = "held" if inputs.get("held_reading_kept") else "linear" if inputs.get("linear_reading_kept") else None
     stages = []
-    second = _diagnose_readings(nominal, bench_model, campaign,
-                                checkpoint=lambda stage, **out: stages.append((stage, out)),
-                                window_states=(model, ids), **kw)
+    second = _diagnose_reading(nominal, bench_model, campaign,
+                               checkpoint=lambda stage, **out: stages.append((stage, out)),
+                               input_reading=reading, window_states=(model, ids), **kw)
+    for key in ("held_reading_tried", "held_reading_kept", "held_reading_why", "linear_reading_tried",
+                "linear_reading_kept", "linear_reading_why"):
+        if key in inputs:
+            second.inputs = {**second.inputs, key: inputs[key]}
     better, why = _restarted_better(first, second)
     say(f"windows: {why}")
     chosen = second if better else first

@@ -253,7 +253,7 @@ def test_the_restarted_diagnosis_is_kept_only_when_it_predicts_the_held_out_rows
     second = _restart_case(causes=["spring_preload"], extended=restarted_rmse)
     calls = []
 
-    def fake(nominal, bench_model, campaign, checkpoint=None, window_states=None, **kw):
+    def fake(nominal, bench_model, campaign, checkpoint=None, window_states=None, input_reading=None, **kw):
         calls.append(None if window_states is None else window_states[1])
         d = first if window_states is None else second
         checkpoint("selected", diagnosis=d)
@@ -262,6 +262,7 @@ def test_the_restarted_diagnosis_is_kept_only_when_it_predicts_the_held_out_rows
     from clutch_model.formats.bag_reader import Campaign, Run
 
     monkeypatch.setattr(engine, "_diagnose_readings", fake)
+    monkeypatch.setattr(engine, "_diagnose_reading", fake)
     t = np.arange(0.0, 1.0, 0.005)
     run = Run("run_000", t, np.full(t.size, 3000.0), np.full(t.size, 5.0), np.full(t.size, 60.0),
               torque_measured_nm=np.full(t.size, 100.0))
