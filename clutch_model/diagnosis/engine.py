@@ -362,17 +362,28 @@ def _window_state_model(d: Diagnosis) -> tuple | None:
 def _restarted_better(first: Diagnosis, second: Diagnosis) -> tuple:
     """-> (the diagnosis on restarted windows is kept, why): it names its causes, on the same
     held-out rows, and predicts them better than the first one's best by HELD_READING_GAIN."""
+    better, why = _second_better(first, second, "the restarted windows", "restarted", "the first", "them")
+    if better is None:
+        return False, f"the restarted windows do not predict the held-out rows better ({why}); kept the first"
+    return better, why
+
+
+def _second_better(first: Diagnosis, second: Diagnosis, what: str, short: str, kept: str, kept_second: str) -> tuple:
+    """The rule a second diagnosis of the same campaign (``what``: another reading of the inputs,
+    or restarted windows) meets -> (True: kept, False: not, None: not better by the bar; why,
+    or the held-out figures when None): it names its causes, on the same held-out rows, and its
+    best held-out RMSE is below the first one's by HELD_READING_GAIN."""
     a, b = _best_held_out_rmse(first), _best_held_out_rmse(second)
-    figures = f"held-out RMSE {b:.3f} N*m restarted against {a:.3f}"
+    figures = f"held-out RMSE {b:.3f} N*m {short} against {a:.3f}"
     if list(second.held_out) != list(first.held_out):
-        return False, f"the restarted windows' held-out rows differ ({figures}); kept the first"
+        return False, f"{what}: the held-out rows differ ({figures}); kept {kept}"
     if not second.causes:
-        return False, f"the restarted windows name nothing ({figures}); kept the first"
+        return False, f"{what}: nothing named ({figures}); kept {kept}"
     if not (np.isfinite(a) and np.isfinite(b)):
-        return False, f"the held-out RMSEs are not comparable ({figures}); kept the first"
+        return False, f"{what}: the held-out RMSEs are not comparable ({figures}); kept {kept}"
     if b < (1.0 - HELD_READING_GAIN) * a:
-        return True, f"the restarted windows predict the held-out rows better ({figures}); kept them"
-    return False, f"the restarted windows do not predict the held-out rows better ({figures}); kept the first"
+        return True, f"{what}: the held-out rows predicted better ({figures}); kept {kept_second}"
+    return None, figures
 
 
 def _diagnose_readings(nominal: ClutchModel, bench_model: ClutchModel, campaign: Campaign, checkpoint=None,
@@ -494,16 +505,11 @@ def _other_reading_better(first: Diagnosis, second: Diagnosis, other: str) -> tu
     (``_unresolved_in_time``): that reading could not name them, the second accounts for what
     it left by the selection's own rules. ``other``: the second reading ("held" or "linear")."""
     kept = "held" if other == "linear" else "linear"
+    better, why = _second_better(first, second, f"the {other} reading", f"{other}", kept, other)
+    if better is not None:
+        return better, why
+    figures = f"{why} {kept}"
     a, b = _best_held_out_rmse(first), _best_held_out_rmse(second)
-    figures = f"held-out RMSE {b:.3f} N*m {other} against {a:.3f} {kept}"
-    if list(second.held_out) != list(first.held_out):
-        return False, f"the {other} reading's held-out rows differ ({figures}); kept {kept}"
-    if not second.causes:
-        return False, f"the {other} reading names nothing ({figures}); kept {kept}"
-    if not (np.isfinite(a) and np.isfinite(b)):
-        return False, f"the {other} reading's held-out RMSE is not comparable ({figures}); kept {kept}"
-    if b < (1.0 - HELD_READING_GAIN) * a:
-        return True, f"the {other} reading predicts the held-out rows better ({figures}); kept {other}"
     if not first.causes and _unresolved_in_time(first) and b <= a:
         return True, (f"the {other} reading names what the {kept} one left unexplained and predicts the "
                       f"held-out rows no worse ({figures}); kept {other}")
