@@ -273,3 +273,22 @@ def test_the_restarted_diagnosis_is_kept_only_when_it_predicts_the_held_out_rows
     assert got.diagnosis_sample["restarted_from"] == ["spring_preload"]
     assert got.diagnosis_sample["restart_kept"] is kept
     assert written == ([first, second] if kept else [first, first])
+
+
+def test_a_restart_names_what_the_first_left_open_only_near_the_noise():
+    """engine._restarted_better: where the first diagnosis named nothing, the restarted one is
+    kept only when what its causes leave on the held-out rows is within RESTART_NOISE_FACTOR
+    times the first's noise innovation sd (a slow misfit the remainder test's noise model
+    forecasts passes for noise); where the first named causes, the 2 % bar alone decides."""
+    from clutch_model.diagnosis.engine import RESTART_NOISE_FACTOR, _restarted_better
+
+    first = _restart_case(verdict="unexplained", extended=32.4)
+    first.noise = {"innovation_sigma_nm": 0.65}
+    far = _restart_case(causes=["spring_preload"], extended=17.8)
+    near = _restart_case(causes=["spring_preload"], extended=0.9 * RESTART_NOISE_FACTOR * 0.65)
+    assert not _restarted_better(first, far)[0]
+    assert _restarted_better(first, near)[0]
+    named = _restart_case(causes=["spring_preload"], extended=32.4)
+    named.noise = {"innovation_sigma_nm": 0.65}
+    assert _restarted_better(named, far)[0]
+    assert not _restarted_better(named, _restart_case(causes=["spring_preload"], extended=32.0))[0]
