@@ -169,3 +169,32 @@ def test_the_slip_is_not_smoothed_where_the_smoothing_would_take_its_own_motion(
     assert decision.smoothing_removes_rad_s > 3 * SMOOTHING_SIGNAL_RATIO * decision.slip_noise_hf_rad_s
     assert not decision.smoothed, decision.to_dict()
     assert decision.to_dict()["slip_smoothing_removes_rad_s"] == decision.smoothing_removes_rad_s
+
+
+def test_the_force_noise_is_read_from_its_samples_as_logged():
+    """A 100 Hz force with AR(1) 0.93 noise of sd 49 N (near Nyquist, white-equivalent: sd
+    sqrt((1 - phi) / (1 + phi)) = 9.4 N), interpolated onto 200 Hz torque stamps: the rows keep a
+    fraction of its noise near their own Nyquist frequency, the samples as logged all of it. The
+    candidates' force resolution takes the logged figure (CampaignContext.logged_force_noise_n)."""
+    from clutch_model.diagnosis.candidates import CampaignContext
+    from clutch_model.diagnosis.input_hold import high_frequency_noise, logged_force_noise_n
+    from clutch_model.formats.bag_reader import Campaign, Run
+
+    rng = np.random.default_rng(11)
+    tf = np.arange(0.0, 60.0, 0.01)
+    noise = np.zeros(tf.size)
+    e = rng.normal(0.0, 49.0 * np.sqrt(1 - 0.93 ** 2), tf.size)
+    for k in range(1, tf.size):
+        noise[k] = 0.93 * noise[k - 1] + e[k]
+    force = 2000.0 + 1500.0 * np.sin(2 * np.pi * 0.2 * tf) + noise
+    rows = np.arange(0.0, 59.99, 0.005)
+    on_rows = np.interp(rows, tf, force)
+    logged = Campaign([Run("r", rows, on_rows, np.full(rows.size, 5.0), np.full(rows.size, 60.0),
+                           samples={"applied_force": (tf, force)})])
+    expected = 49.0 * np.sqrt(0.07 / 1.93)
+    assert logged_force_noise_n(logged) == pytest.approx(expected, rel=0.15)
+    assert high_frequency_noise([on_rows]) < 0.5 * expected          # the rows lost it
+    regridded = Campaign([Run("r", rows, on_rows, np.full(rows.size, 5.0), np.full(rows.size, 60.0))])
+    ctx = CampaignContext(regridded, 1.0, 1.0, 1.0, logged_force_noise_n=logged_force_noise_n(logged))
+    assert ctx.force_noise_n == pytest.approx(logged_force_noise_n(logged))
+    assert CampaignContext(regridded, 1.0, 1.0, 1.0).force_noise_n < 0.5 * expected
