@@ -244,8 +244,8 @@ def none_or_bench_anchored(data, sel, ctx, candidate_ids, alpha: float, min_gain
         check.tries(cid, fitted, f"{cid} on the bench friction", say)
     best, untold = check.chosen()
     if best is None:
-        return _far_gap_unexplained(sel, check, say, level_of=lambda: _level_leaves(check, bench_base, ctx, train, say)), \
-            check.found
+        level_of = lambda: _level_leaves(check, bench_base, ctx, train, say)   # noqa: E731
+        return _far_gap_unexplained(sel, check, say, level_of=level_of), check.found
     cid, fitted, vs_bench = best
     if untold is not None:
         why = (f"{sel.reason}; but the calibration absorbed a discrepancy with the bench's friction "
