@@ -5,6 +5,8 @@ sweeps and releases; slip levels that change; a pack temperature that follows th
 dissipated energy; slip angle), and the noise classes a car's torque sensor shows."""
 from __future__ import annotations
 
+from dataclasses import dataclass, field
+
 import numpy as np
 from scipy.signal import butter, lfilter, medfilt
 
@@ -140,3 +142,26 @@ def split_every_third(run_start: np.ndarray):
     run = np.cumsum(run_start) - 1
     test = (run % 3) == 1
     return ~test, test
+
+
+@dataclass
+class Fixed:
+    """A fitted model (selection.Fitted) that predicts a fixed series: a stand-in for a
+    candidate fit in tests of the verdict's rules."""
+    prediction: np.ndarray
+    parameters: dict = field(default_factory=dict)
+    parameters_ci95: dict = field(default_factory=dict)
+    readings: list = field(default_factory=list)
+    model: object = None
+
+    def predict(self, data):
+        return self.prediction
+
+
+def run_grid(rate_hz: float, run_s: float, n_runs: int):
+    """Runs of ``run_s`` at ``rate_hz`` end to end -> (t from each run's start, run index,
+    run_start)."""
+    n = int(rate_hz * run_s)
+    t = np.tile(np.arange(n) / rate_hz, n_runs)
+    run = np.repeat(np.arange(n_runs), n)
+    return t, run, np.r_[True, run[1:] != run[:-1]]

@@ -6,7 +6,6 @@ as `discovered` torque x slip sign.) The selection and discovery are stood in fo
 predictions; the held-out comparison and the report's causes are the engine's own."""
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 from types import SimpleNamespace
 
 import numpy as np
@@ -15,28 +14,14 @@ import pytest
 import clutch_model.diagnosis.engine as engine
 from clutch_model.diagnosis.selection import Cause, Selection, SelectionData
 
+from .synthetic_residuals import Fixed, run_grid
+
 RATE_HZ, RUN_S, N_RUNS = 200.0, 10.0, 4
 OFFSET_NM = 10.0
 
 
-@dataclass
-class Fixed:
-    """A fitted model that predicts a fixed series."""
-    prediction: np.ndarray
-    parameters: dict = field(default_factory=dict)
-    parameters_ci95: dict = field(default_factory=dict)
-    readings: list = field(default_factory=list)
-    model: object = None
-
-    def predict(self, data):
-        return self.prediction
-
-
 def _data(seed=0):
-    n = int(RATE_HZ * RUN_S)
-    t = np.tile(np.arange(n) / RATE_HZ, N_RUNS)
-    run = np.repeat(np.arange(N_RUNS), n)
-    run_start = np.r_[True, run[1:] != run[:-1]]
+    t, run, run_start = run_grid(RATE_HZ, RUN_S, N_RUNS)
     # a reversible fade: the torque dips with each slip-power burst and recovers
     fade = -6.0 * np.sin(np.pi * t / 2.5) ** 2 * (1.0 + 0.3 * run)
     noise = np.random.default_rng(seed).normal(0.0, 1.0, t.size)

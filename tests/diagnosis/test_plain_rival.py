@@ -4,30 +4,17 @@ rival that does about as well, or worse, leaves the named answer alone. The sele
 in for by fixed predictions; the block test and the verdict are the module's own."""
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-
 import numpy as np
 
 from clutch_model.diagnosis.plain_rival import RIVAL_CUT, named_or_plain_rival
 from clutch_model.diagnosis.selection import Cause, CandidateScore, Selection, SelectionData, SelectionStep
+from .synthetic_residuals import Fixed, run_grid
 
 RATE_HZ, RUN_S, N_RUNS = 200.0, 12.0, 4
 
 
-@dataclass
-class Fixed:
-    prediction: np.ndarray
-    parameters: dict = field(default_factory=dict)
-
-    def predict(self, data):
-        return self.prediction
-
-
 def _data(seed=0):
-    n = int(RATE_HZ * RUN_S)
-    t = np.tile(np.arange(n) / RATE_HZ, N_RUNS)
-    run = np.repeat(np.arange(N_RUNS), n)
-    run_start = np.r_[True, run[1:] != run[:-1]]
+    t, run, run_start = run_grid(RATE_HZ, RUN_S, N_RUNS)
     structure = 6.0 * np.sin(2 * np.pi * 0.3 * t + run) + 3.0 * np.sign(np.sin(2 * np.pi * 0.7 * t))
     y = structure + np.random.default_rng(seed).normal(0.0, 1.0, t.size)
     test = (t % 3.0) >= 2.0                      # a third of every run, in spans
