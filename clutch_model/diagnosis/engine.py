@@ -352,9 +352,7 @@ def _window_state_model(d: Diagnosis) -> tuple | None:
         model = sel.steps[0].scores[0].fitted.model
     else:
         return None
-    model = getattr(model, "model", model)
-    plant = [m.id for m in getattr(model, "mechanisms", []) if m.path != "measurement"]
-    if not plant:
+    if not any(m.path != "measurement" for m in model.mechanisms):
         return None
     return model, [m.id for m in model.mechanisms]
 
@@ -900,14 +898,14 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
         whole = all(h.whole_run for h in split.held_out) and (sampled is None or not held_out)
         fit_campaign = campaign.subset(fit_runs) if whole else _masked_torque(campaign, fit_mask)
         cal_base, calibration_info = calibrate(bench_model, fit_campaign)
-        if sampled is not None:
-            # the windows from here on start from the calibrated model's states (or the states of
-            # the model a first diagnosis came to: diagnose_campaign)
-            t1 = time.perf_counter()
-            campaign = sampled.restart_from(cal_base if window_states is None else window_states[0])
-            if window_states is not None:
-                sample_info = {**sample_info, "restarted_from": list(window_states[1])}
-            timings["sample (whole-campaign simulations)"] += time.perf_counter() - t1
+    if sampled is not None and (calibrate is not None or window_states is not None):
+        # the windows from here on start from the calibrated model's states (or the states of
+        # the model a first diagnosis came to: diagnose_campaign)
+        t1 = time.perf_counter()
+        campaign = sampled.restart_from(cal_base if window_states is None else window_states[0])
+        if window_states is not None:
+            sample_info = {**sample_info, "restarted_from": list(window_states[1])}
+        timings["sample (whole-campaign simulations)"] += time.perf_counter() - t1
     timings["car calibration"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     say("fitting the baseline friction correction")
