@@ -44,7 +44,8 @@ def named_or_plain_rival(data, sel, say=lambda msg: None) -> tuple:
     named = set(sel.cause_ids)
     r_named = np.asarray(residual(data, sel.final), float)
     test = np.asarray(data.test_mask, bool)
-    found = {"named_held_out_rmse": None, "rivals": {}}
+    leaves = leaves_of(data, r_named, sel.remainder_structure)
+    found = {"named_held_out_rmse": leaves["held_out_rmse"], "rivals": {}}
     best = None
     for sc in sel.steps[0].scores:
         if sc.id in named:
@@ -57,7 +58,6 @@ def named_or_plain_rival(data, sel, say=lambda msg: None) -> tuple:
         entry = {"held_out_rmse": float(np.sqrt(np.mean(r_rival[rows] ** 2))), "cut_frac": float(plain.cut_frac),
                  "t": float(plain.t_stat), "p": float(plain.p_value), "blocks": int(plain.n_blocks)}
         found["rivals"][sc.id] = entry
-        found["named_held_out_rmse"] = float(np.sqrt(np.mean(r_named[rows] ** 2)))
         if plain.cut_frac >= RIVAL_CUT and plain.t_stat > 0 and (best is None or plain.cut_frac > best[1]["cut_frac"]):
             best = (sc, entry)
     found["took_the_name"] = best is not None
@@ -71,5 +71,4 @@ def named_or_plain_rival(data, sel, say=lambda msg: None) -> tuple:
            f"t = {entry['t']:.1f} over {entry['blocks']} blocks): no candidate explains the residual as well as "
            f"another")
     say(f"not named: {why}")
-    leaves = leaves_of(data, r_named, sel.remainder_structure)
     return sel.overruled([*sel.cause_ids, sc.id], leaves, f"{sel.reason}; but {why}"), found
