@@ -2,8 +2,8 @@
 (diagnosis.ridged_selection).
 
 Independent expectations: its answer replaces the first only when it names every cause the
-first named and more, and predicts the held-out rows better than the first's model; on the
-quick car with coloured noise, a drag torque the weak ridge's correction absorbed (the first
+first named and more (or one lag or delay in place of another), and predicts the held-out rows
+better than the first's model; on the quick car with coloured noise, a drag torque the weak ridge's correction absorbed (the first
 selection: none) is named, and the extended model is closer to the true torque on the run
 diagnose never saw than the calibrated one.
 """
@@ -15,7 +15,7 @@ import numpy as np
 
 import pytest
 
-from clutch_model.diagnosis.ridged_selection import names_more
+from clutch_model.diagnosis.ridged_selection import names_more, swaps_a_dynamic_rival
 from clutch_model.formats.bag_reader import read_bags
 from clutch_model.virtual_car.hidden_campaigns import (check_campaign, make_hidden_campaign,
                                                        unseen_stamps_rmse_nm)
@@ -35,6 +35,20 @@ def test_only_a_selection_naming_more_replaces_the_first():
     assert not names_more(_sel("named", "torque_sensor_lag"), _sel("named", "actuator_lag"))
     assert not names_more(_sel("named", "actuator_lag", "torque_offset"), _sel("named", "actuator_lag"))
     assert not names_more(_sel("none"), _sel("unexplained"))
+
+
+def test_a_lag_or_delay_in_place_of_another_may_replace_the_first():
+    assert swaps_a_dynamic_rival(_sel("named", "torque_sensor_lag"), _sel("named", "transport_delay"))
+    assert swaps_a_dynamic_rival(_sel("named", "actuator_lag", "torque_offset"),
+                                 _sel("named", "transport_delay", "torque_offset"))
+    # a map-like cause swapped, a cause lost or added, the same causes, no first name: not a swap
+    assert not swaps_a_dynamic_rival(_sel("named", "spring_preload"), _sel("named", "drag_torque"))
+    assert not swaps_a_dynamic_rival(_sel("named", "actuator_lag"), _sel("named", "spring_preload"))
+    assert not swaps_a_dynamic_rival(_sel("named", "actuator_lag", "torque_offset"),
+                                     _sel("named", "transport_delay", "drag_torque"))
+    assert not swaps_a_dynamic_rival(_sel("named", "transport_delay"), _sel("named", "transport_delay"))
+    assert not swaps_a_dynamic_rival(_sel("named", "transport_delay"), _sel("unexplained"))
+    assert not swaps_a_dynamic_rival(_sel("unexplained"), _sel("named", "transport_delay"))
 
 
 # The quick car (three 30 s runs, two seen, AR(1) 0.9 torque and slip noise, lock-up, unaligned
