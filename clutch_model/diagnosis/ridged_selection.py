@@ -42,7 +42,7 @@ import numpy as np
 from clutch_model.diagnosis.candidates import MechanismCandidate, baseline_fit
 from clutch_model.diagnosis.fitting import time_parameter_names
 from clutch_model.diagnosis.friction_ridge import ridge_label
-from clutch_model.diagnosis.selection import _compare, residual
+from clutch_model.diagnosis.selection import LOOKALIKE_ALPHA, _compare, residual
 from clutch_model.diagnosis.force_dynamics import LARGE_CUT_ALPHA, LARGE_PLAIN_CUT
 from clutch_model.diagnosis.structure_test import DEFAULT_MAX_ORDER, plain_cross_fit_test
 
@@ -83,13 +83,22 @@ def swaps_a_dynamic_rival(first, second) -> bool:
     (training rows 0.87), the misfit a smoothing filter takes more of, and the plain squares
     over every row named a 10.6 ms sensor lag (t = 1.6, training rows for the delay t = 2.3);
     at the data's ridge (x inf) the delay was better on both the held-out bag (1.09 against
-    1.41 N*m) and the training rows, and named."""
+    1.41 N*m) and the training rows, and named.
+
+    The two models have as many mechanism parameters (the second's correction is held
+    harder), so the second's model meets the first's at ``SWAP_ALPHA``, the level at which one
+    lookalike beats another, not at the remainder's 1e-3: on the virtual car's lag and delay
+    pair under car conditions (seed 7) the first named a 211 ms actuator lag with a 127 ms
+    sensor lag, the second the true pair, its model better held out at t = 3.7 (12.57 -> 10.94
+    N*m, innovation variance -11 %), short of 1e-3 over the few held-out blocks."""
     a, b = set(first.cause_ids), set(second.cause_ids)
     if first.verdict != "named" or second.verdict != "named" or len(a) != len(b):
         return False
     gone, new = a - b, b - a
     return len(gone) == 1 and all(time_parameter_names(i) for i in gone | new)
 
+
+SWAP_ALPHA = LOOKALIKE_ALPHA   # a lag swapped for another: its model against the first's at this level
 
 PLAIN_ROUTE_BLOCK_S = 5.0    # held-out blocks of the plain route (a slow misfit's errors are correlated within)
 
@@ -133,7 +142,8 @@ def against_first(data, first, second, alpha: float, min_gain_frac: float, secon
     if halves and second_base is not None:
         halves = halves_in_plain_squares(data, residual(data, second_base), resid_second)[0]
     plain_ok = bool(halves and head.t_stat > 0)
-    info = {"held_out_t": float(head.t_stat), "innovation_variance_cut": float(head.gain_frac),
+    info = {"held_out_t": float(head.t_stat), "held_out_p": float(head.p_value), "alpha": float(alpha),
+            "innovation_variance_cut": float(head.gain_frac),
             "held_out_rmse": float(head.rmse_alt), "first_held_out_rmse": float(head.rmse_null),
             "plain_mean_square_cut": cut, "plain_block_t": float(block.t_stat),
             "plain_block_p": float(block.p_value), "plain_blocks": int(block.n_blocks),
@@ -162,7 +172,9 @@ def selection_at_the_data_ridge(select, data, first, written, cal_base, ctx, ids
     if not (names_more(first, second) or swaps_a_dynamic_rival(first, second)):
         say(line + "; the first selection kept")
         return first, None, None, None, info
-    better, info.against_first = against_first(data, first, second, alpha, min_gain_frac, second_base=base_r)
+    # a swap puts one lag in place of another of one dimension: the bar of two lookalikes
+    level = alpha if names_more(first, second) else max(alpha, SWAP_ALPHA)
+    better, info.against_first = against_first(data, first, second, level, min_gain_frac, second_base=base_r)
     head = info.against_first
     say(f"{line}; against the first's model on held-out rows: t = {head['held_out_t']:.1f}, RMSE "
         f"{head['held_out_rmse']:.2f} vs {head['first_held_out_rmse']:.2f} N*m (plain squares: "
