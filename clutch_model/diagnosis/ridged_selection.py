@@ -123,9 +123,14 @@ def halves_in_plain_squares(data, resid_null, resid_alt) -> tuple:
     return plain.significant(LARGE_CUT_ALPHA, LARGE_PLAIN_CUT), float(plain.cut_frac), plain
 
 
-def against_first(data, first, second, alpha: float, min_gain_frac: float, second_base=None) -> tuple:
+def against_first(data, first, second, alpha: float, min_gain_frac: float, second_base=None,
+                  swap_plain_cut: float | None = None) -> tuple:
     """(the second selection's final model predicts the held-out residual significantly better
     than the first's, the comparison for the report).
+
+    ``swap_plain_cut``, for a lag swapped for another (``swaps_a_dynamic_rival``): the second's
+    plain held-out mean square must also be this far below the first's (reported as
+    ``swap_plain_cut``, the cut itself).
 
     Better in whitened terms at ``alpha``, or, when the noise model forecasts the misfit from
     its own past, in the torque's own units: the second's model halves the first's plain
@@ -157,7 +162,11 @@ def against_first(data, first, second, alpha: float, min_gain_frac: float, secon
             "plain_mean_square_cut": cut, "plain_block_t": float(block.t_stat),
             "plain_block_p": float(block.p_value), "plain_blocks": int(block.n_blocks),
             "taken_in_plain_squares": bool(plain_ok and not ok)}
-    return ok or plain_ok, info
+    better = ok or plain_ok
+    if swap_plain_cut is not None:
+        info["swap_plain_cut"] = float(head.plain_gain_frac)
+        better = better and head.plain_gain_frac >= swap_plain_cut
+    return bool(better), info
 
 
 def selection_at_the_data_ridge(select, data, first, written, cal_base, ctx, ids, ridge, mask, alpha: float,
@@ -178,19 +187,16 @@ def selection_at_the_data_ridge(select, data, first, written, cal_base, ctx, ids
     second = select(data, base_r, cands_r)
     info = RidgedSelection(ridge.factor, first.cause_ids, second.verdict, second.cause_ids, False)
     line = f"at ridge x{label}: {second.verdict} {', '.join(second.cause_ids)}".rstrip()
-    if not (names_more(first, second) or swaps_a_dynamic_rival(first, second)):
+    swap = swaps_a_dynamic_rival(first, second)     # as many causes: never also names_more
+    if not (swap or names_more(first, second)):
         say(line + "; the first selection kept")
         return first, None, None, None, info
     # a swap puts one lag in place of another of one dimension: the bar of two lookalikes,
     # and a material cut in plain squares (the whitened comparison favours its alternative)
-    swap = not names_more(first, second)
-    level = max(alpha, SWAP_ALPHA) if swap else alpha
-    better, info.against_first = against_first(data, first, second, level, min_gain_frac, second_base=base_r)
+    better, info.against_first = against_first(
+        data, first, second, max(alpha, SWAP_ALPHA) if swap else alpha, min_gain_frac, second_base=base_r,
+        swap_plain_cut=SWAP_PLAIN_CUT if swap else None)
     head = info.against_first
-    if swap:
-        plain_cut = 1.0 - (head["held_out_rmse"] / head["first_held_out_rmse"]) ** 2
-        head["swap_plain_cut"] = float(plain_cut)
-        better = bool(better and plain_cut >= SWAP_PLAIN_CUT)
     say(f"{line}; against the first's model on held-out rows: t = {head['held_out_t']:.1f}, RMSE "
         f"{head['held_out_rmse']:.2f} vs {head['first_held_out_rmse']:.2f} N*m (plain squares: "
         f"{100 * head['plain_mean_square_cut']:.0f} % cut at block t = {head['plain_block_t']:.1f})"
