@@ -243,16 +243,18 @@ class ProgressiveReport:
     calibrated model until a cause is named, a report.json with ``status``), then the whole
     report. Ctrl-C keeps what was written."""
 
-    def __init__(self, out_dir, plots: bool = True):
+    def __init__(self, out_dir, plots: bool = True, joins=None):
         self.out = Path(out_dir)
         self.plots = plots
+        self.joins = joins          # continued_bags.Joins: bags diagnosed as one drive, or None
         self.out.mkdir(parents=True, exist_ok=True)
         self.partial = {"status": "started"}
 
     def _partial(self, status: str, **fields):
         self.partial.update(fields)
         self.partial["status"] = status
-        _write_text(self.out / "report.json", json.dumps(jsonable(self.partial), indent=2, allow_nan=False))
+        rep = in_bag_terms(jsonable(self.partial), self.joins)
+        _write_text(self.out / "report.json", json.dumps(rep, indent=2, allow_nan=False))
 
     def __call__(self, stage: str, **kw):
         if stage == "split":
@@ -266,15 +268,32 @@ class ProgressiveReport:
                         "clutch-sim diagnose: extended model (= the calibrated model until a cause is named)")
             self._partial("calibrated; naming causes", rmse_nm=dict(kw["rmse"]), calibration=kw.get("info", {}))
         elif stage == "selected":
-            write_report(kw["diagnosis"], self.out, plots=self.plots)
+            write_report(kw["diagnosis"], self.out, plots=self.plots, joins=self.joins)
 
 
-def write_report(d: Diagnosis, out_dir, plots: bool = True) -> dict:
+def in_bag_terms(rep: dict, joins) -> dict:
+    """The report with the labels of bags the diagnosis joined into one drive
+    (continued_bags) given in the bags' own terms, and what was joined."""
+    if joins is None or not joins.checks:
+        return rep
+    rep = dict(rep)
+    for key in ("held_out_runs", "fit_runs"):
+        if isinstance(rep.get(key), list):
+            rep[key] = joins.relabel(rep[key])
+    sample = rep.get("diagnosis_sample")
+    if isinstance(sample, dict) and isinstance(sample.get("windows"), list):
+        rep["diagnosis_sample"] = {**sample, "windows": joins.relabel(sample["windows"])}
+    rep["continued_bags"] = joins.as_dict()
+    return rep
+
+
+def write_report(d: Diagnosis, out_dir, plots: bool = True, joins=None) -> dict:
     """report.json, both models and report.html, with the figures unless ``plots`` is False
-    (drawing them is about a fifth of a short diagnosis)."""
+    (drawing them is about a fifth of a short diagnosis); ``joins``: bags diagnosed as one
+    drive (continued_bags.Joins), reported in the bags' own terms."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    rep = report_dict(d)
+    rep = in_bag_terms(report_dict(d), joins)
     _save_model(d.calibrated_model, out / "calibrated_model.yaml",
                 "clutch-sim diagnose: calibrated baseline (bench fit + car calibration)")
     _save_model(d.extended_model, out / "extended_model.yaml",

@@ -192,7 +192,7 @@ def _valid(topic_kind: str, values: np.ndarray) -> np.ndarray:
 _CHANNEL = {"force": "applied_force", "slip": "slip_speed", "sump": "sump_temperature"}
 
 
-def _latest(times: np.ndarray, values: np.ndarray, at: np.ndarray) -> np.ndarray:
+def latest_sample(times: np.ndarray, values: np.ndarray, at: np.ndarray) -> np.ndarray:
     idx = np.searchsorted(times, at, side="right") - 1
     if not idx.size or idx.min() >= 0:           # the usual case: every row has a sample before it
         return values.take(idx)
@@ -233,9 +233,9 @@ def read_bag(path, topics: TopicNames = TopicNames(), bulk: bool = True) -> Run:
     run = Run(
         name=name,
         t=(rows - first_ns) * 1e-9,
-        applied_force_n=_latest(*inputs["force"], rows),
-        slip_speed_rad_s=_latest(*inputs["slip"], rows),
-        sump_temperature_c=_latest(*inputs["sump"], rows),
+        applied_force_n=latest_sample(*inputs["force"], rows),
+        slip_speed_rad_s=latest_sample(*inputs["slip"], rows),
+        sump_temperature_c=latest_sample(*inputs["sump"], rows),
         start_time_ns=first_ns,
         rejected_samples=rejected,
         samples=samples,
@@ -244,7 +244,7 @@ def read_bag(path, topics: TopicNames = TopicNames(), bulk: bool = True) -> Run:
                               ("pack_temperature_measured_c", "pack_temperature", topics.pack_temperature)):
         if topic in series:
             times, values = series[topic]
-            setattr(run, attr, _latest(times, values, rows))
+            setattr(run, attr, latest_sample(times, values, rows))
             ok = np.isfinite(values)
             samples[chan] = ((times[ok] - first_ns) * 1e-9, values[ok])
     return run

@@ -129,7 +129,7 @@ class BagBlocks:
 
 def _latest_from(tail, times: np.ndarray, values: np.ndarray, at: np.ndarray) -> np.ndarray:
     """The latest sample at or before each of ``at`` among ``tail`` (the last sample before this
-    batch, or None) and the batch's samples; NaN where there is none (``bag_reader._latest``)."""
+    batch, or None) and the batch's samples; NaN where there is none (``bag_reader.latest_sample``)."""
     idx = np.searchsorted(times, at, side="right") - 1
     if not idx.size or idx.min() >= 0:
         return values.take(idx)

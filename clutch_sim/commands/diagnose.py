@@ -54,6 +54,7 @@ def add_parser(sub):
 def run(args) -> int:
     from clutch_model.formats.bench_csv import read_bench
     from clutch_model.diagnosis.calibration import car_calibration
+    from clutch_model.diagnosis.continued_bags import join_continued_bags
     from clutch_model.diagnosis.engine import diagnose_campaign
     from clutch_model.diagnosis.parallel import FitExecutor
     from clutch_model.diagnosis.report import ProgressiveReport
@@ -89,15 +90,18 @@ def run(args) -> int:
     # (docs/diagnosis_statistics.md, "The bench fit")
     bench_fit = fit_friction(bench, nominal, joint=True)
     bench_model = bench_fit.model.with_mechanisms([m for m in nominal.mechanisms])
+    # a recorder rolling over to a new bag mid-drive: such bags are diagnosed as one drive
+    runs, joins = join_continued_bags(bench_model, runs, say)
+    held_out = [joins.drive_label(h) for h in args.held_out] if args.held_out else None
 
     def calibrate(model, fit_campaign):
         return car_calibration(model, fit_campaign, mc_samples=args.mc_samples, seed=args.seed, progress=say)
 
-    writer = ProgressiveReport(args.out, plots=not args.no_plots)      # each output written as soon as it is known
+    writer = ProgressiveReport(args.out, plots=not args.no_plots, joins=joins)      # each output written as soon as it is known
     with FitExecutor(args.scheduler, progress=not args.no_progress, say=say) as executor:
         held = [runs]
         del runs                  # the engine's reference only: the native rows are freed once decimated
-        diagnose_campaign(nominal, bench_model, held.pop(), held_out=args.held_out, candidates=args.candidates,
+        diagnose_campaign(nominal, bench_model, held.pop(), held_out=held_out, candidates=args.candidates,
                           calibrate=calibrate, progress=say, checkpoint=writer, diagnosis_rate_hz=rate,
                           fit_executor=executor, sample_budget_s=budget,
                           bench_info={"rmse": bench_fit.rmse, "rows": bench_fit.n_rows,
