@@ -189,3 +189,44 @@ def test_an_extension_worse_than_the_catalog_s_closest_is_not_named(monkeypatch)
     # nothing came closest in the catalog: nothing to compare with
     bare = Selection("unexplained", [], [], None, None, None, [], {}, "structure remains")
     assert engine._discovered_or_closest(data, bare, outcome(12.65), said.append)[1].accepted
+
+
+def _discovered(shift_nm, measured, rng_seed=0):
+    """A discovery outcome whose extension predicts the truth's torque moved by ``shift_nm``
+    of structure the truth has (or not)."""
+    from types import SimpleNamespace
+
+    from clutch_model.diagnosis.engine import DiscoveryOutcome
+    from clutch_model.diagnosis.selection import Selection
+
+    fitted = SimpleNamespace(predict=lambda data: shift_nm)
+    cause = SimpleNamespace(id="discovered", parameters={"mu:slip_power": 1e-3}, fitted=fitted)
+    sel = Selection("named", [cause], [], fitted, None, None, [], {}, "named in order: discovered")
+    return DiscoveryOutcome(sel, True)
+
+
+def test_terms_that_hardly_change_the_written_prediction_are_not_a_discovery():
+    """Beating the noise model on the selection's base is not enough: the model written with
+    the terms must cut the written calibrated model's plain held-out mean square by 5 %."""
+    from types import SimpleNamespace
+
+    from clutch_model.diagnosis.engine import DISCOVERY_PLAIN_CUT, material_discovery
+
+    rng = np.random.default_rng(4)
+    n = 4000
+    structure = 1.5 * np.sin(np.linspace(0, 40, n))          # what the calibrated model misses
+    noise = rng.normal(0.0, 2.0, n)
+    measured = structure + noise                              # calibrated model predicts 0
+    campaign = SimpleNamespace(torque_measured=measured)
+    written = SimpleNamespace(residual=measured.copy())
+    held = np.zeros(n, bool)
+    held[::3] = True
+    said = []
+    # the terms take the whole structure: 1.5^2/2 of 4 + 1.125 N*m^2, a 22 % cut: kept
+    out, why = material_discovery(_discovered(structure, measured), None, campaign, written, held, said.append)
+    assert out.accepted and why == ""
+    # a twentieth of it: a cut under 1 %: not a discovery, the verdict none, and said why
+    out, why = material_discovery(_discovered(0.05 * structure, measured), None, campaign, written, held,
+                                  said.append)
+    assert not out.accepted and out.selection.verdict == "none" and not out.refused
+    assert "immaterial" in why and f"{100 * DISCOVERY_PLAIN_CUT:.0f} %" in why and said
