@@ -76,6 +76,7 @@ class Condition:
     schedule: str = "short-runs"
     size: tuple = (6, 2, 8.0)
     quick_size: tuple = (4, 2, 8.0)
+    continuous_drive: bool = False      # one drive cut into consecutive bags (car_logs.CarLogSpec)
 
     def spec_kwargs(self, quick: bool = False) -> dict:
         seen, unseen, dur = self.quick_size if quick else self.size
@@ -85,7 +86,8 @@ class Condition:
             noise["slip_speed"] = make_noise(self.slip_noise[0], self.slip_noise_sigma, **self.slip_noise[1])
         kw = {"schedule": self.schedule, "n_runs": seen + unseen, "run_duration_s": dur,
               "noise": noise, "lockup": self.lockup, "slip_sign_changes": self.slip_sign_changes,
-              "resolution": dict(self.resolution or {}), "sensor_range": dict(self.sensor_range or {})}
+              "resolution": dict(self.resolution or {}), "sensor_range": dict(self.sensor_range or {}),
+              "continuous_drive": self.continuous_drive}
         if self.clocks == "lab":
             kw.update(clocks=dict(LAB_CLOCKS), random_phase=False)
         elif self.clocks == "gateway":
@@ -134,6 +136,10 @@ CONDITIONS = {c.name: c for c in (
               schedule="long-drive", size=(1, 1, 120.0), quick_size=(1, 1, 40.0)),
     Condition("few_long", "few long runs", "few-long", schedule="few-long",
               size=(3, 1, 40.0), quick_size=(2, 1, 20.0)),
+    Condition("rollover", "one drive cut into consecutive bags by a recorder rolling over (no pause: the pack "
+                          "temperature and every state carry across), topics on their own clocks, lock-up",
+              "rollover", clocks="car", lockup=True, schedule="few-long", size=(4, 1, 30.0),
+              quick_size=(3, 1, 20.0), continuous_drive=True),
     Condition("car", "everything at once: unaligned topics, AR(1) φ 0.9 torque and slip noise, "
                      "lock-up, few long runs", "car", clocks="car",
               torque_noise=("ar1", {"phi": 0.9}), slip_noise=("ar1", {"phi": 0.9}), lockup=True,
