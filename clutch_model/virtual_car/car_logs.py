@@ -258,9 +258,10 @@ class CarLogSpec:
     run_duration_s: float | None = None
     fine_rate_hz: float = 1000.0
     gap_s: float = 60.0
-    # one drive cut into consecutive bags (a recorder rolling over): no pause between runs, the
-    # plant (pack temperature, film, mechanism states) and the sump carry across bag boundaries
-    continuous_drive: bool = False
+    # the first this many runs are one drive cut into consecutive bags (a recorder rolling over):
+    # no pause between them, the plant (pack temperature, film, mechanism states) and the sump
+    # carry across their boundaries; later runs follow after pauses as usual (0: none)
+    continuous_runs: int = 0
     start_time_ns: int = DEFAULT_START_TIME_NS
     clocks: dict = field(default_factory=dict)      # channel -> TopicClock (defaults above)
     noise: dict = field(default_factory=dict)       # channel -> Noise (defaults above)
@@ -723,17 +724,19 @@ def synthesize_car_logs(spec: CarLogSpec | None = None, base_model: ClutchModel 
     for i in range(n_runs):
         force, slip, load, segs = _drive_profile(rng_sched, spec, t_run, k_t)
         warm = float(rng_sched.uniform(0.0, min(0.08, 20.0 / dur)))
-        if spec.continuous_drive and S:
+        joined = 0 < i < spec.continuous_runs                   # run i continues run i - 1
+        if joined:
             sumps[i] = S[-1][-1] + warm / spec.fine_rate_hz       # the sump goes on from where it was
         S.append(sumps[i] + warm * t_run)
         F.append(force); W.append(slip); L.append(load)
         schedules.append({"sump_level_c": round(float(sumps[i]), 3), "sump_warmup_c_per_s": round(warm, 4),
                           "segments": segs})
         start_ns.append(int(spec.start_time_ns) + int(round(t_cur * 1e3)) * 1_000_000)
-        t_cur += dur if spec.continuous_drive else dur + spec.gap_s + float(rng_sched.uniform(0, 0.25 * spec.gap_s))
+        rolls_over = i + 1 < spec.continuous_runs                # run i + 1 continues it
+        t_cur += dur if rolls_over else dur + spec.gap_s + float(rng_sched.uniform(0, 0.25 * spec.gap_s))
     t_abs = np.concatenate([(sn - spec.start_time_ns) * 1e-9 + t_run for sn in start_ns])
     run_start = np.zeros(t_abs.size, dtype=bool)
-    run_start[np.arange(1 if spec.continuous_drive else n_runs) * n_fine] = True
+    run_start[[i * n_fine for i in range(n_runs) if not 0 < i < spec.continuous_runs]] = True
     force_all, slip_all, sump_all, load_all = (np.concatenate(x) for x in (F, W, S, L))
 
     if progress:

@@ -76,7 +76,8 @@ class Condition:
     schedule: str = "short-runs"
     size: tuple = (6, 2, 8.0)
     quick_size: tuple = (4, 2, 8.0)
-    continuous_drive: bool = False      # one drive cut into consecutive bags (car_logs.CarLogSpec)
+    continuous_drive: bool = False      # the runs diagnose sees are one drive cut into consecutive bags
+    #                                     (car_logs.CarLogSpec.continuous_runs); the unseen runs follow after pauses
 
     def spec_kwargs(self, quick: bool = False) -> dict:
         seen, unseen, dur = self.quick_size if quick else self.size
@@ -87,7 +88,7 @@ class Condition:
         kw = {"schedule": self.schedule, "n_runs": seen + unseen, "run_duration_s": dur,
               "noise": noise, "lockup": self.lockup, "slip_sign_changes": self.slip_sign_changes,
               "resolution": dict(self.resolution or {}), "sensor_range": dict(self.sensor_range or {}),
-              "continuous_drive": self.continuous_drive}
+              "continuous_runs": seen if self.continuous_drive else 0}
         if self.clocks == "lab":
             kw.update(clocks=dict(LAB_CLOCKS), random_phase=False)
         elif self.clocks == "gateway":
@@ -137,7 +138,8 @@ CONDITIONS = {c.name: c for c in (
     Condition("few_long", "few long runs", "few-long", schedule="few-long",
               size=(3, 1, 40.0), quick_size=(2, 1, 20.0)),
     Condition("rollover", "one drive cut into consecutive bags by a recorder rolling over (no pause: the pack "
-                          "temperature and every state carry across), topics on their own clocks, lock-up",
+                          "temperature and every state carry across; the unseen bags after a pause), topics on "
+                          "their own clocks, lock-up",
               "rollover", clocks="car", lockup=True, schedule="few-long", size=(4, 1, 30.0),
               quick_size=(3, 1, 20.0), continuous_drive=True),
     Condition("car", "everything at once: unaligned topics, AR(1) φ 0.9 torque and slip noise, "

@@ -539,3 +539,33 @@ def test_a_sensor_range_pins_the_logged_reading_at_a_share_of_the_campaign_peak(
         np.testing.assert_array_equal(o.fine["sensor_torque_nm"], b.fine["sensor_torque_nm"])
         np.testing.assert_array_equal(o.signals.applied_force.values, b.signals.applied_force.values)
     assert pinned > 20
+
+
+def test_a_drive_cut_into_bags_carries_the_plant_across_the_roll_overs():
+    """continuous_runs: the first runs are one drive cut into consecutive bags. Each starts
+    where the last ended (no pause), the pack temperature and the sump go on across the
+    roll-over, and the plant equals one simulation of the whole drive; the run after them
+    follows a pause and restarts with the pack at its sump."""
+    from clutch_model.virtual_car.car_logs import CarLogSpec, synthesize_car_logs
+
+    res = synthesize_car_logs(CarLogSpec(seed=4, n_runs=4, run_duration_s=10.0, continuous_runs=3))
+    runs = res.runs
+    for a, b in zip(runs[:2], runs[1:3]):
+        end_a = a.start_time_ns * 1e-9 + a.fine["t_s"][-1]
+        assert 0.0 < b.start_time_ns * 1e-9 - end_a < 2e-3          # the next fine step
+        assert abs(b.fine["pack_temperature_c"][0] - a.fine["pack_temperature_c"][-1]) < 0.5
+        assert abs(b.fine["sump_temperature_c"][0] - a.fine["sump_temperature_c"][-1]) < 0.01
+    assert runs[1].fine["pack_temperature_c"][0] > runs[1].fine["sump_temperature_c"][0] + 5.0   # hot at the roll-over
+    assert runs[3].start_time_ns * 1e-9 - (runs[2].start_time_ns * 1e-9 + 10.0) >= res.spec.gap_s
+    assert runs[3].fine["pack_temperature_c"][0] == pytest.approx(runs[3].fine["sump_temperature_c"][0], abs=1e-6)
+    # the drive's plant is one simulation: restarting the second bag would change it
+    drive = {k: np.concatenate([r.fine[k] for r in runs[:3]]) for k in ("t_s", "applied_force_n",
+                                                                      "slip_speed_rad_s", "sump_temperature_c")}
+    t = np.concatenate([(r.start_time_ns - runs[0].start_time_ns) * 1e-9 + r.fine["t_s"] for r in runs[:3]])
+    one = np.zeros(t.size, bool)
+    one[0] = True
+    locked = np.concatenate([r.fine["locked"] for r in runs[:3]])
+    ref = simulate(res.true_model, t, drive["applied_force_n"], drive["slip_speed_rad_s"],
+                   drive["sump_temperature_c"], run_start=one)
+    got = np.concatenate([r.fine["torque_nm"] for r in runs[:3]])
+    np.testing.assert_allclose(got[~locked], ref.torque_nm[~locked], rtol=1e-9, atol=1e-6)
