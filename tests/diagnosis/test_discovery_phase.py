@@ -230,3 +230,27 @@ def test_terms_that_hardly_change_the_written_prediction_are_not_a_discovery():
                                   said.append)
     assert not out.accepted and out.selection.verdict == "none" and not out.refused
     assert "immaterial" in why and f"{100 * DISCOVERY_PLAIN_CUT:.0f} %" in why and said
+
+
+def test_terms_beside_catalog_causes_must_change_the_written_prediction(monkeypatch):
+    """Beside named catalog causes, discovered terms stay only when the model written with both
+    cuts the held-out mean square of the model written with the catalog causes alone by 5 %."""
+    from types import SimpleNamespace
+
+    import clutch_model.diagnosis.engine as E
+
+    rng = np.random.default_rng(5)
+    n = 3000
+    extra = 1.2 * np.sin(np.linspace(0, 30, n))               # what the catalog causes leave
+    measured = extra + rng.normal(0.0, 1.5, n)
+    campaign = SimpleNamespace(torque_measured=measured)
+    catalog_fit = SimpleNamespace(residual=measured.copy())  # the catalog model predicts 0 here
+    monkeypatch.setattr(E, "held_to_the_data", lambda fit, *a, **k: (catalog_fit, None))
+    sel = SimpleNamespace(final=SimpleNamespace(fit=None), cause_ids=["torque_offset"])
+    held = np.zeros(n, bool)
+    held[1::2] = True
+    args = (None, campaign, sel, None, held, 0.0, 1.0, 1.0, lambda m: None)
+    kept = E.material_beside(_discovered(extra, measured), *args)
+    assert kept.accepted                                      # 0.72 of 2.25 + 0.72 N*m^2: a 24 % cut
+    dropped = E.material_beside(_discovered(0.1 * extra, measured), *args)
+    assert not dropped.accepted and not dropped.refused
