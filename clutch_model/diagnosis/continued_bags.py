@@ -7,14 +7,18 @@ bags, nothing hidden: the friction level differed between bags by -28 % to +32 %
 and the answer was `unexplained`).
 
 The diagnosis joins such bags into one drive, the plant state carried across the roll-over,
-when the data says so: a bag that starts within ``CONTINUATION_GAP_S`` of the previous bag's
-last message is simulated both ways with the bench-fitted model (the previous bag from its own
-start, then the next restarted, or continued), and joined when the continued simulation fits
-its slipping rows better by ``JOIN_RATIO`` in mean square (each with its own least-squares
-torque scale, so a friction level the bench got wrong does not decide), compared where the
-force has been steady (``steady_force``: a 95 ms actuator lag the bench model lacks put both
-simulations 54-70 N*m off on every slipping row and kept a continued drive apart; on its
-steady rows, restarted 15.7 and 26.0 N*m, continued 8.4 and 9.1). Bags written back to
+when the data says so. The bags are simulated in time order with the bench-fitted model, each
+from the state the path chosen so far left; at every bag that starts within
+``CONTINUATION_GAP_S`` of the previous bag's last message it is simulated both ways (restarted,
+continued), and the bags are joined when the continued simulation fits the bag's slipping rows
+better by ``JOIN_RATIO`` in mean square. Both are scaled by the least-squares torque scale that
+fits the previous bag, so a friction level the bench got wrong does not decide (a scale of
+each hypothesis' own takes the level the two pack temperatures give the bag, and kept a 20 s
+bag of a drive apart); they are compared where the force has been steady (``steady_force``: a
+95 ms actuator lag the bench model lacks put both simulations 54-70 N*m off on every slipping
+row and kept a drive apart; on its steady rows, restarted 69 and 66 N*m, continued 9.5 and
+8.5). Checked pair by pair, each from a restarted previous bag, a drive of six bags came out
+as three of two. Bags written back to
 back by a recorder that restarts the plant with each bag (the replay contract) stay apart:
 their restarted simulation fits better.
 
@@ -27,7 +31,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from clutch_model.formats.bag_reader import Campaign, Run, latest_sample
+from clutch_model.formats.bag_reader import Run, latest_sample
 
 CONTINUATION_GAP_S = 0.5     # a bag starting this soon after the previous one's last message may continue it
 JOIN_RATIO = 0.9             # continued fits the next bag's slipping rows below this fraction of restarted (MS)
@@ -170,61 +174,94 @@ def steady_force(t, force, half_window_s: float = STEADY_S) -> np.ndarray:
     return (spread < np.maximum(STEADY_BAND_N, STEADY_BAND_FRAC * np.abs(force))) & (t > t[0] + half_window_s)
 
 
-def _scaled_ms(measured: np.ndarray, predicted: np.ndarray) -> float:
-    """Mean square of measured - k * predicted, k the least-squares scale."""
-    den = float(predicted @ predicted)
-    k = float(measured @ predicted) / den if den > 0 else 0.0
-    return float(np.mean((measured - k * predicted) ** 2))
+def _compared_rows(run: Run, pred: np.ndarray, window_s: float | None = None) -> np.ndarray:
+    """The rows two simulations are compared on: slipping, measured, predicted, the force steady
+    (``steady_force``) where enough rows are; within the run's first ``window_s``."""
+    meas = np.asarray(run.torque_measured_nm, float)
+    t = np.asarray(run.t, float)
+    use = np.isfinite(meas) & np.isfinite(pred) & (np.abs(run.slip_speed_rad_s) > SLIPPING_RAD_S)
+    if window_s is not None:
+        use &= t < t[0] + window_s
+    steady = use & steady_force(t, run.applied_force_n)
+    return steady if np.count_nonzero(steady) >= MIN_ROWS else use
 
 
-def continuation_check(model, prev: Run, nxt: Run) -> dict:
-    """Simulate ``prev`` then ``nxt`` restarted, and the two joined; compare on ``nxt``'s
-    slipping rows (its first DECISION_WINDOW_S)."""
-    from clutch_model.prediction import predict_campaign
+def _branch(sim):
+    """A copy of a chunked simulation that goes on from the same state."""
+    from clutch_model.plant.simulate import ChunkedSimulation
 
-    off = (int(nxt.start_time_ns) - int(prev.start_time_ns)) * 1e-9
-    joined = join_runs([prev, nxt])
-    apart = predict_campaign(model, Campaign([prev, nxt]), energy0_j=0.0).torque_nm[len(prev):]
-    together_all = predict_campaign(model, Campaign([joined]), energy0_j=0.0).torque_nm
-    at = np.searchsorted(joined.t, np.asarray(nxt.t, float) + off - 1e-9)
-    at = np.clip(at, 0, joined.t.size - 1)
-    same_row = np.abs(joined.t[at] - (np.asarray(nxt.t, float) + off)) < 1e-6
-    together = together_all[at]
-    meas = nxt.torque_measured_nm
+    twin = ChunkedSimulation(sim.model)
+    twin.state, twin.carry, twin._d = sim.state.copy(), sim.carry.copy(), sim._d
+    return twin
+
+
+def _run_on(sim, run: Run, t_offset_s: float, restart: bool) -> np.ndarray:
+    """The plant torque of ``run``'s rows, simulated on from ``sim`` (restarted, or continued
+    with its times ``t_offset_s`` after the drive's start)."""
+    t = np.asarray(run.t, float) + t_offset_s
+    rs = np.zeros(t.size, bool)
+    rs[0] = restart
+    return np.array(sim.run(t, run.applied_force_n, run.slip_speed_rad_s, run.sump_temperature_c,
+                            run_start=rs).torque_nm)
+
+
+def continuation_check(prev: Run, prev_pred: np.ndarray, nxt: Run, restarted: np.ndarray,
+                       continued: np.ndarray) -> dict:
+    """Compare the two simulations of ``nxt`` (restarted, continued from ``prev``) on its
+    slipping rows (its first DECISION_WINDOW_S, the force steady), both scaled by the torque
+    scale that fits ``prev``'s simulation to its measured torque (the same in both: a friction
+    level the bench model got wrong is taken out, the level the two pack temperatures give
+    ``nxt`` is not)."""
     out = {"bag": nxt.name, "after": prev.name, "gap_s": round(gap_s(prev, nxt), 6), "joined": False}
-    if meas is None:
+    if prev.torque_measured_nm is None or nxt.torque_measured_nm is None:
         out["why"] = "no measured torque"
         return out
-    meas = np.asarray(meas, float)
-    use = (same_row & np.isfinite(meas) & np.isfinite(apart) & np.isfinite(together)
-           & (np.abs(nxt.slip_speed_rad_s) > SLIPPING_RAD_S) & (np.asarray(nxt.t, float) < nxt.t[0] + DECISION_WINDOW_S))
-    steady = use & steady_force(nxt.t, nxt.applied_force_n)
-    if np.count_nonzero(steady) >= MIN_ROWS:
-        use = steady
-    if np.count_nonzero(use) < MIN_ROWS:
+    ref = _compared_rows(prev, prev_pred)
+    use = _compared_rows(nxt, restarted + continued, DECISION_WINDOW_S)
+    if np.count_nonzero(use) < MIN_ROWS or np.count_nonzero(ref) < MIN_ROWS:
         out["why"] = "too few slipping rows to tell"
         return out
-    ms_apart, ms_together = _scaled_ms(meas[use], apart[use]), _scaled_ms(meas[use], together[use])
-    out.update(rmse_restarted_nm=float(np.sqrt(ms_apart)), rmse_continued_nm=float(np.sqrt(ms_together)),
-               rows=int(np.count_nonzero(use)), joined=bool(ms_together < JOIN_RATIO * ms_apart))
+    p = prev_pred[ref]
+    k = float(np.asarray(prev.torque_measured_nm, float)[ref] @ p) / float(p @ p) if np.any(p) else 1.0
+    meas = np.asarray(nxt.torque_measured_nm, float)[use]
+    ms_apart = float(np.mean((meas - k * restarted[use]) ** 2))
+    ms_together = float(np.mean((meas - k * continued[use]) ** 2))
+    out.update(torque_scale=k, rmse_restarted_nm=float(np.sqrt(ms_apart)),
+               rmse_continued_nm=float(np.sqrt(ms_together)), rows=int(np.count_nonzero(use)),
+               joined=bool(ms_together < JOIN_RATIO * ms_apart))
     return out
 
 
 def join_continued_bags(model, runs: list, say=None) -> tuple:
     """-> (runs, Joins): the campaign's bags with every roll-over the data confirms joined
-    into one drive (``continuation_check``)."""
+    into one drive. The bags are simulated in time order with ``model``, each from the state
+    the path chosen so far left (``continuation_check`` at every candidate roll-over)."""
+    from clutch_model.plant.simulate import ChunkedSimulation
+
     runs = sorted(runs, key=lambda r: r.start_time_ns)
     joins = Joins()
-    groups = [[runs[0]]] if runs else []
-    gaps = [[]] if runs else []
+    if not runs:
+        return runs, joins
+    groups, gaps = [[runs[0]]], [[]]
+    sim = ChunkedSimulation(model)
+    drive_start_ns = int(runs[0].start_time_ns)
+    pred = _run_on(sim, runs[0], 0.0, restart=True)
     for prev, nxt in zip(runs, runs[1:]):
         if may_continue(prev, nxt):
-            chk = continuation_check(model, prev, nxt)
+            restart_sim, continue_sim = _branch(sim), _branch(sim)
+            restarted = _run_on(restart_sim, nxt, 0.0, restart=True)
+            continued = _run_on(continue_sim, nxt, (int(nxt.start_time_ns) - drive_start_ns) * 1e-9, restart=False)
+            chk = continuation_check(prev, pred, nxt, restarted, continued)
             joins.checks.append(chk)
             if chk["joined"]:
                 groups[-1].append(nxt)
                 gaps[-1].append(chk["gap_s"])
+                sim, pred = continue_sim, continued
                 continue
+            sim, pred = restart_sim, restarted
+        else:
+            pred = _run_on(sim, nxt, 0.0, restart=True)
+        drive_start_ns = int(nxt.start_time_ns)
         groups.append([nxt])
         gaps.append([])
     out = []
