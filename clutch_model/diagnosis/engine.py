@@ -1343,8 +1343,8 @@ def material_discovery(discovery: DiscoveryOutcome, data: SelectionData, campaig
     innovation variance and yet hardly change the written model's prediction. Measured on an
     outside generator's campaign with nothing hidden (mostly negative slip, 61 % of the time
     locked): slip-power and pressure x temperature friction terms beat the noise model at
-    held-out t = 3.3 and cut the selection's held-out mean square by 5.8 %, but the written
-    extension's by 0.1 % (1.96 N*m both): `discovered` where there was nothing. The extensions
+    held-out t = 5.3 and cut the selection's held-out mean square by 5.8 %, but the written
+    extension's by 0.1-0.2 % (1.96 N*m both): `discovered` where there was nothing. The extensions
     found for real effects cut the held-out RMSE by 33-54 %."""
     whole = discovery.final if discovery.final is not None else discovery.cause.fitted
     predicted = np.asarray(whole.predict(data), float)

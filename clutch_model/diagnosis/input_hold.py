@@ -218,16 +218,8 @@ def model_input_noise(campaign, model, window_s: float = SENSITIVITY_WINDOW_S) -
     tq_t = run.samples["measured_torque"][0] if "measured_torque" in run.samples else run.t
     tq_t = tq_t[(tq_t >= base.t[0]) & (tq_t <= base.t[-1])]
     ok = np.isfinite(pred)
-    if ok.sum() < 2:
-        return slope, float("nan")
-    at = np.interp(tq_t, base.t[ok], pred[ok])
-    # slipping stretches only: locked, the model's torque is its static capacity, whose sign
-    # follows the slip sensor's noise around 0 (the diagnosis keeps those rows out)
-    row = np.clip(np.searchsorted(base.t, tq_t, side="right") - 1, 0, base.t.size - 1)
-    slip_at = np.abs(base.slip_speed_rad_s[row]) > 1.0
-    edges = np.flatnonzero(np.diff(np.r_[0, slip_at.astype(np.int8), 0]))
-    stretches = [at[a:b] for a, b in zip(edges[::2], edges[1::2]) if b - a > HF_DIFFERENCE_ORDER]
-    return slope, high_frequency_noise(stretches, typical=True)
+    at = np.interp(tq_t, base.t[ok], pred[ok]) if ok.sum() > 1 else np.zeros(0)
+    return slope, high_frequency_noise([at], typical=True)
 
 
 def decide_input_noise(campaign, model, ratio: float = SMOOTHING_NOISE_RATIO) -> InputNoise:

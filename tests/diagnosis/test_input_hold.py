@@ -199,33 +199,3 @@ def test_the_force_noise_is_read_from_its_samples_as_logged():
     assert ctx.force_noise_n == pytest.approx(logged_force_noise_n(logged))
     assert CampaignContext(regridded, 1.0, 1.0, 1.0).force_noise_n < 0.5 * expected
 
-
-def test_the_noise_floor_is_the_models_noise_while_slipping_not_its_flips_in_lock_up():
-    """Locked (slip sensor noise around 0), the model's torque is its static capacity with the
-    sign of the noise: thousands of N*m flipping from sample to sample. The diagnosis keeps
-    those rows out, and so does the white floor of its noise models: the same campaign with
-    most of its time locked gets the floor of its slipping stretches (measured on a generator's
-    campaign 61 % locked: a floor of 411 N*m against a torque noise of 1.85 put every noise
-    model's innovation sd at 411 N*m)."""
-    from clutch_model.diagnosis.input_hold import model_input_noise
-
-    model = load_model(None)
-    slipping, _ = _campaign(lambda rng, n: rng.normal(0.0, 2.0, n), slip_noise=0.03)
-    r = slipping.runs[0]
-    locked = (r.t % 4.0) < 2.4                          # 60 % of the time locked
-    rng = np.random.default_rng(9)
-    slip = np.where(locked, rng.normal(0.0, 0.03, r.t.size), r.slip_speed_rad_s)
-    from dataclasses import replace
-
-    from clutch_model.formats.bag_reader import Campaign
-
-    mostly_locked = Campaign([replace(r, slip_speed_rad_s=slip, samples={**r.samples, "slip_speed": (r.t, slip)})])
-    _, floor_slipping = model_input_noise(slipping, model)
-    _, floor_locked = model_input_noise(mostly_locked, model)
-    assert np.isfinite(floor_locked) and floor_locked < 3.0 * max(floor_slipping, 0.05), (floor_locked, floor_slipping)
-    # what the flips would have given: the model's torque on every stamp
-    from clutch_model.diagnosis.input_hold import high_frequency_noise
-    from clutch_model.prediction import predict_campaign
-
-    every = predict_campaign(model, mostly_locked, energy0_j=0.0).torque_nm
-    assert high_frequency_noise([every], typical=True) > 20.0 * max(floor_locked, 0.05)
