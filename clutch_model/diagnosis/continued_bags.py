@@ -186,15 +186,6 @@ def _compared_rows(run: Run, pred: np.ndarray, window_s: float | None = None) ->
     return steady if np.count_nonzero(steady) >= MIN_ROWS else use
 
 
-def _branch(sim):
-    """A copy of a chunked simulation that goes on from the same state."""
-    from clutch_model.plant.simulate import ChunkedSimulation
-
-    twin = ChunkedSimulation(sim.model)
-    twin.state, twin.carry, twin._d = sim.state.copy(), sim.carry.copy(), sim._d
-    return twin
-
-
 def _run_on(sim, run: Run, t_offset_s: float, restart: bool) -> np.ndarray:
     """The plant torque of ``run``'s rows, simulated on from ``sim`` (restarted, or continued
     with its times ``t_offset_s`` after the drive's start)."""
@@ -248,7 +239,7 @@ def join_continued_bags(model, runs: list, say=None) -> tuple:
     pred = _run_on(sim, runs[0], 0.0, restart=True)
     for prev, nxt in zip(runs, runs[1:]):
         if may_continue(prev, nxt):
-            restart_sim, continue_sim = _branch(sim), _branch(sim)
+            restart_sim, continue_sim = sim.branch(), sim.branch()
             restarted = _run_on(restart_sim, nxt, 0.0, restart=True)
             continued = _run_on(continue_sim, nxt, (int(nxt.start_time_ns) - drive_start_ns) * 1e-9, restart=False)
             chk = continuation_check(prev, pred, nxt, restarted, continued)

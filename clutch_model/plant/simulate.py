@@ -136,6 +136,14 @@ class ChunkedSimulation:
     def energy_j(self) -> float:
         return float(self.state[K.S_ENERGY])
 
+    def branch(self) -> "ChunkedSimulation":
+        """An independent simulation that goes on from this one's state (for trying two
+        continuations of the same rows)."""
+        twin = ChunkedSimulation(self.model)
+        twin._p, twin._d = self._p, self._d
+        twin.state, twin.carry = self.state.copy(), self.carry.copy()
+        return twin
+
     def run(self, t, applied_force_n, slip_speed_rad_s, sump_temperature_c, run_start=None,
             copy: bool = True) -> SimResult:
         """Simulate the next rows; ``run_start`` marks rows that restart the plant (the very

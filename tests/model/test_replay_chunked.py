@@ -95,6 +95,25 @@ def test_chunked_plant_restarts_at_run_starts_and_reuses_its_buffer():
     assert bitwise_equal(np.concatenate(got), whole.torque_nm)
 
 
+def test_a_branch_goes_on_from_the_same_state_and_leaves_its_origin_alone():
+    """Two branches of one chunked simulation, each run on the same rest of the rows, give the
+    whole run's numbers bit for bit; running a branch does not move the simulation it came from."""
+    run = read_bag(SAMPLES / "run_00")
+    model = load_model().with_mechanisms(plant_mechanisms())
+    args = (run.t, run.applied_force_n, run.slip_speed_rad_s, run.sump_temperature_c)
+    whole = simulate(model, *args, energy0_j=1.5e5)
+    half = len(run) // 2
+    sim = ChunkedSimulation(model, energy0_j=1.5e5)
+    sim.run(*(x[:half] for x in args))
+    state = sim.state.copy()
+    first, second = sim.branch(), sim.branch()
+    for twin in (first, second):
+        rest = twin.run(*(x[half:] for x in args))
+        assert bitwise_equal(rest.torque_nm, whole.torque_nm[half:])
+    assert bitwise_equal(sim.state, state)
+    assert bitwise_equal(sim.run(*(x[half:] for x in args)).torque_nm, whole.torque_nm[half:])
+
+
 @pytest.mark.parametrize("sizes", [[1], [5, 333], [2000]])
 def test_chunked_measurement_equals_whole_trace(sizes):
     rng = np.random.default_rng(7)
