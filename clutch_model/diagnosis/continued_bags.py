@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from clutch_model.formats.bag_reader import Run, latest_sample
+from clutch_model.formats.bag_reader import Run, latest_sample, replay_grid
 
 CONTINUATION_GAP_S = 0.5     # a bag starting this soon after the previous one's last message may continue it
 JOIN_RATIO = 0.9             # continued fits the next bag's slipping rows below this fraction of restarted (MS)
@@ -141,14 +141,9 @@ def join_runs(runs: list, name: str | None = None) -> Run:
             chans.setdefault(ch, []).append((np.asarray(t, float) + off, np.asarray(v, float)))
     samples = {ch: (np.concatenate([a for a, _ in parts]), np.concatenate([b for _, b in parts]))
                for ch, parts in chans.items()}
-    start = max(float(samples[c][0][0]) for c in INPUTS)
-    rows = samples["applied_force"][0]
-    rows = rows[rows >= start]
-    run = Run(name=name or f"{first.name}..{runs[-1].name}", t=rows,
-              applied_force_n=latest_sample(*samples["applied_force"], rows),
-              slip_speed_rad_s=latest_sample(*samples["slip_speed"], rows),
-              sump_temperature_c=latest_sample(*samples["sump_temperature"], rows),
-              start_time_ns=t0, rejected_samples=int(sum(r.rejected_samples for r in runs)), samples=samples)
+    rows, force, slip, sump = replay_grid(*(samples[c] for c in INPUTS))
+    run = Run(name=name or f"{first.name}..{runs[-1].name}", t=rows, applied_force_n=force,
+              slip_speed_rad_s=slip, sump_temperature_c=sump, start_time_ns=t0, rejected_samples=int(sum(r.rejected_samples for r in runs)), samples=samples)
     if "measured_torque" in samples:
         run.torque_measured_nm = latest_sample(*samples["measured_torque"], rows)
     if "pack_temperature" in samples:

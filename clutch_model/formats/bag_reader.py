@@ -202,6 +202,15 @@ def latest_sample(times: np.ndarray, values: np.ndarray, at: np.ndarray) -> np.n
     return out
 
 
+def replay_grid(force, slip, sump) -> tuple:
+    """The replay grid of the three inputs' samples ((times, values) each, times in any one
+    unit, sorted): a row at every force sample at or after the first sample of every input,
+    each input the latest sample at or before the row. -> (rows, force, slip, sump)."""
+    start = max(force[0][0], slip[0][0], sump[0][0])
+    rows = force[0][force[0] >= start]
+    return rows, latest_sample(*force, rows), latest_sample(*slip, rows), latest_sample(*sump, rows)
+
+
 def read_bag(path, topics: TopicNames = TopicNames(), bulk: bool = True) -> Run:
     """Read one car-test bag and put it on the replay grid. ``bulk=False`` forces rosbags'
     general per-message decoder (the bulk MCAP path gives the same numbers, faster)."""
@@ -225,17 +234,15 @@ def read_bag(path, topics: TopicNames = TopicNames(), bulk: bool = True) -> Run:
             raise DataError(f"bag {name}: topic {topic} has no valid samples")
         inputs[kind] = (times, values) if n_ok == ok.size else (times[ok], values[ok])
         samples[_CHANNEL[kind]] = ((inputs[kind][0] - first_ns) * 1e-9, inputs[kind][1])
-    t0_inputs = max(inputs[k][0][0] for k in inputs)
-    rows = inputs["force"][0]
-    rows = rows[rows >= t0_inputs]
+    rows, force, slip, sump = replay_grid(inputs["force"], inputs["slip"], inputs["sump"])
     if rows.size < 2:
         raise DataError(f"bag {name}: fewer than 2 applied_force samples after every input has started")
     run = Run(
         name=name,
         t=(rows - first_ns) * 1e-9,
-        applied_force_n=latest_sample(*inputs["force"], rows),
-        slip_speed_rad_s=latest_sample(*inputs["slip"], rows),
-        sump_temperature_c=latest_sample(*inputs["sump"], rows),
+        applied_force_n=force,
+        slip_speed_rad_s=slip,
+        sump_temperature_c=sump,
         start_time_ns=first_ns,
         rejected_samples=rejected,
         samples=samples,
