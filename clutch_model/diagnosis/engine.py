@@ -1136,7 +1136,7 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
     if discovery is not None and discovery.accepted:
         cause = "discovered"
         found = discovery.cause
-        whole = discovery.final if discovery.final is not None else found.fitted
+        whole = discovery.fitted
         extended_model = whole.model
         predicted = np.asarray(whole.predict(data), float)
         extended_fit = _DiscoveredExtension(extended_model, campaign.torque_measured - predicted, predicted)
@@ -1281,6 +1281,11 @@ class DiscoveryOutcome:
     def cause(self):
         return self.selection.causes[0] if self.selection.causes else None
 
+    @property
+    def fitted(self):
+        """The extension's fitted model: ``final`` when given, else the discovered cause's own."""
+        return self.final if self.final is not None else self.cause.fitted
+
     def tried(self) -> list:
         out = []
         for st in self.selection.steps:
@@ -1331,6 +1336,17 @@ DISCOVERY_PLAIN_CUT = 0.05   # a discovered extension cuts the held-out plain me
 BESIDE_TORQUE_SHARE = 0.01   # terms beside named causes move the held-out prediction by this share of the torque
 
 
+def _written_cut(discovery: DiscoveryOutcome, data: SelectionData, campaign: Campaign, base_residual,
+                 eval_mask: np.ndarray) -> tuple:
+    """-> (the cut of the held-out plain mean square by the discovered extension's model
+    against a written model's residual ``base_residual``, the two held-out RMSEs, its
+    prediction)."""
+    predicted = np.asarray(discovery.fitted.predict(data), float)
+    base = _rmse(base_residual, eval_mask)
+    ext = _rmse(np.asarray(campaign.torque_measured, float) - predicted, eval_mask)
+    return (1.0 - (ext / base) ** 2 if base > 0 else 0.0), base, ext, predicted
+
+
 def material_discovery(discovery: DiscoveryOutcome, data: SelectionData, campaign: Campaign, written,
                        eval_mask: np.ndarray, say) -> tuple:
     """Terms beyond the catalog named where the catalog named nothing are kept only when the
@@ -1346,11 +1362,7 @@ def material_discovery(discovery: DiscoveryOutcome, data: SelectionData, campaig
     held-out t = 5.3 and cut the selection's held-out mean square by 5.8 %, but the written
     extension's by 0.1-0.2 % (1.96 N*m both): `discovered` where there was nothing. The extensions
     found for real effects cut the held-out RMSE by 33-54 %."""
-    whole = discovery.final if discovery.final is not None else discovery.cause.fitted
-    predicted = np.asarray(whole.predict(data), float)
-    cal = _rmse(written.residual, eval_mask)
-    ext = _rmse(np.asarray(campaign.torque_measured, float) - predicted, eval_mask)
-    cut = 1.0 - (ext / cal) ** 2 if cal > 0 else 0.0
+    cut, cal, ext, _ = _written_cut(discovery, data, campaign, written.residual, eval_mask)
     if not np.isfinite(cut) or cut >= DISCOVERY_PLAIN_CUT:
         return discovery, ""
     why = (f"the terms found beyond the catalog ({', '.join(discovery.cause.parameters)}) cut the written model's "
@@ -1377,14 +1389,9 @@ def material_beside(discovery: DiscoveryOutcome, data: SelectionData, campaign: 
     an offset; noise 0.72 N*m): μ_f terms in the force rate and the slip power, moving the
     friction by under 1 %, were named as a fourth cause."""
     catalog_fit, _ = held_to_the_data(sel.final.fit, campaign, fit_mask, energy_total, torque_scale, sigma_guess)
-    whole = discovery.final if discovery.final is not None else discovery.cause.fitted
-    predicted = np.asarray(whole.predict(data), float)
-    ext = _rmse(np.asarray(campaign.torque_measured, float) - predicted, eval_mask)
-    cat = _rmse(catalog_fit.residual, eval_mask)
-    cut = 1.0 - (ext / cat) ** 2 if cat > 0 else 0.0
+    cut, cat, ext, predicted = _written_cut(discovery, data, campaign, catalog_fit.residual, eval_mask)
     # how much the terms move the prediction, against the torque itself
-    cat_pred = np.asarray(catalog_fit.predicted, float) if catalog_fit.predicted is not None else \
-        np.asarray(campaign.torque_measured, float) - np.asarray(catalog_fit.residual, float)
+    cat_pred = np.asarray(campaign.torque_measured, float) - np.asarray(catalog_fit.residual, float)
     moved = _rmse(predicted - cat_pred, eval_mask)
     level = _rmse(cat_pred, eval_mask)
     share = moved / level if level > 0 else 0.0
@@ -1436,7 +1443,7 @@ def _discovered_or_closest(data: SelectionData, sel: Selection, discovery: Disco
     left = (sel.closest_leaves or {}).get("held_out_rmse")
     if left is None or not np.isfinite(left) or not sel.closest:
         return sel, discovery
-    found = discovery.final if discovery.final is not None else discovery.cause.fitted
+    found = discovery.fitted
     ext = leaves_of(data, residual(data, found), None)["held_out_rmse"]
     if not (np.isfinite(ext) and left < ext):
         return sel, discovery
@@ -1464,7 +1471,7 @@ def _discovered_or_force_path(data: SelectionData, sel: Selection, discovery: Di
     Measured on force_sensor_hysteresis@lab#1 (``--quick``, magnitude seed 20261202: a 337 N
     sensor play): discovery named slip-power terms that cut the held-out RMSE by 17 % and made
     the unseen runs 16 % worse against the true torque."""
-    found = discovery.final if discovery.final is not None else discovery.cause.fitted
+    found = discovery.fitted
     r_cal = residual(data, sel.final)
     plain = replace(sel, verdict="none")   # the checks' own gate
     ext = _compare(data, r_cal, residual(data, found), DEFAULT_MAX_ORDER)
