@@ -226,8 +226,8 @@ def join_continued_bags(model, runs: list, say=None) -> tuple:
 
     runs = sorted(runs, key=lambda r: r.start_time_ns)
     joins = Joins()
-    if not runs:
-        return runs, joins
+    if not any(may_continue(prev, nxt) for prev, nxt in zip(runs, runs[1:])):
+        return runs, joins          # no bag starts right after another: nothing to simulate
     groups, gaps = [[runs[0]]], [[]]
     sim = ChunkedSimulation(model)
     drive_start_ns = int(runs[0].start_time_ns)

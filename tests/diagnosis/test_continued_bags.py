@@ -111,3 +111,7 @@ def test_bags_apart_in_time_are_not_candidates(tmp_path, gap_s):
 
     moved = replace(runs[1], start_time_ns=runs[1].start_time_ns + int(gap_s * 1e9))
     assert not may_continue(runs[0], moved)
+    # a campaign with no bag right after another is returned as it is, nothing simulated
+    # (no model needed) and nothing weighed
+    apart, joins = join_continued_bags(None, [moved, runs[0]])
+    assert [r.name for r in apart] == sorted(r.name for r in (moved, runs[0])) and not joins.checks
