@@ -721,22 +721,23 @@ def synthesize_car_logs(spec: CarLogSpec | None = None, base_model: ClutchModel 
         (rng_sched.permutation(n_runs) + rng_sched.uniform(0.1, 0.9, n_runs)) / n_runs)
     F, W, L, S, schedules, start_ns = [], [], [], [], [], []
     t_cur = 0.0
+    def continues(i):                                            # run i continues run i - 1
+        return 0 < i < spec.continuous_runs
+
     for i in range(n_runs):
         force, slip, load, segs = _drive_profile(rng_sched, spec, t_run, k_t)
         warm = float(rng_sched.uniform(0.0, min(0.08, 20.0 / dur)))
-        joined = 0 < i < spec.continuous_runs                   # run i continues run i - 1
-        if joined:
+        if continues(i):
             sumps[i] = S[-1][-1] + warm / spec.fine_rate_hz       # the sump goes on from where it was
         S.append(sumps[i] + warm * t_run)
         F.append(force); W.append(slip); L.append(load)
         schedules.append({"sump_level_c": round(float(sumps[i]), 3), "sump_warmup_c_per_s": round(warm, 4),
                           "segments": segs})
         start_ns.append(int(spec.start_time_ns) + int(round(t_cur * 1e3)) * 1_000_000)
-        rolls_over = i + 1 < spec.continuous_runs                # run i + 1 continues it
-        t_cur += dur if rolls_over else dur + spec.gap_s + float(rng_sched.uniform(0, 0.25 * spec.gap_s))
+        t_cur += dur if continues(i + 1) else dur + spec.gap_s + float(rng_sched.uniform(0, 0.25 * spec.gap_s))
     t_abs = np.concatenate([(sn - spec.start_time_ns) * 1e-9 + t_run for sn in start_ns])
     run_start = np.zeros(t_abs.size, dtype=bool)
-    run_start[[i * n_fine for i in range(n_runs) if not 0 < i < spec.continuous_runs]] = True
+    run_start[[i * n_fine for i in range(n_runs) if not continues(i)]] = True
     force_all, slip_all, sump_all, load_all = (np.concatenate(x) for x in (F, W, S, L))
 
     if progress:
