@@ -163,6 +163,8 @@ def choose_split(runs, held_out=None, min_runs_whole: int = MIN_RUNS_WHOLE, guar
     runs = list(runs)
     if not runs:
         raise DataError("no runs")
+    if isinstance(held_out, Split):           # another diagnosis' split, as it was
+        return held_out
     if held_out:
         return Split([parse_held_out(str(h)) for h in held_out], guard_s, "given")
     if len(runs) >= min_runs_whole:
