@@ -456,9 +456,10 @@ def _same_held_out(first: Diagnosis, kw: dict) -> dict:
     the held reading left 4.71 N*m and structure (`unexplained`); read linearly the sensor lag
     was named at 35.5 ms and left 1.82 N*m (noise 1.47), on other spans, and was not kept. A
     split the user gave, or whole windows of a sampled long log, stay as they are."""
-    if kw.get("held_out") or first.split is None or (getattr(first, "diagnosis_sample", None) or {}).get("sampled"):
+    split = getattr(first, "split", None)
+    if kw.get("held_out") or split is None or (getattr(first, "diagnosis_sample", None) or {}).get("sampled"):
         return kw
-    return {**kw, "held_out": first.split}
+    return {**kw, "held_out": split}
 
 
 def _reading_left_open(d: Diagnosis) -> bool:

@@ -312,3 +312,36 @@ def test_the_held_reading_s_outputs_are_written_in_place_of_the_first(monkeypatc
         assert stages == [("calibrated", None), ("selected", first), ("calibrated", "held"), ("selected", second)]
     else:
         assert stages == [("calibrated", None), ("selected", first), ("selected", first)]
+
+
+@pytest.mark.parametrize("given,sampled,passed", [(None, False, "first"), (["b[0:10]"], False, "given"),
+                                                  (None, True, None)])
+def test_the_second_reading_holds_out_the_first_one_s_rows(monkeypatch, given, sampled, passed):
+    """The automatic split keeps held-out spans off the extremes of the pack temperature the
+    inputs give the bench model, so another reading may pick other spans, and two diagnoses on
+    other rows are never compared (_second_better). The second reading is given the first
+    one's split (engine._same_held_out); a split the user gave, or the windows of a sampled
+    long log, stay as they are. choose_split keeps a Split it is given."""
+    from types import SimpleNamespace
+
+    import clutch_model.diagnosis.engine as engine
+    from clutch_model.diagnosis.split import HeldOut, Split, choose_split
+
+    split = Split([HeldOut("a", 10.0, 20.0)], 0.5, "time spans")
+    first = _diagnosis(closest=["torque_sensor_lag"], extended=31.1, closest_rmse=5.185)
+    first.split, first.diagnosis_sample = split, {"sampled": sampled}
+    second = _diagnosis(causes=["torque_sensor_lag"], extended=5.0)
+    asked = []
+
+    def fake(nominal, bench_model, campaign, checkpoint=None, input_reading=None, **kw):
+        asked.append(kw.get("held_out"))
+        return second if input_reading == "held" else first
+
+    monkeypatch.setattr(engine, "_diagnose_reading", fake)
+    _, campaign = _log(True, seed=8, duration_s=1.0)
+    engine.diagnose_campaign(None, None, campaign, held_out=given)
+    assert asked[0] == given
+    assert asked[1] is {"first": split, "given": given, None: None}[passed]
+    runs = [SimpleNamespace(name="a", t=np.arange(100.0), duration_s=99.0)]
+    assert choose_split(runs, split) is split
+
