@@ -174,6 +174,7 @@ class Diagnosis:
     discovery: "DiscoveryOutcome | None" = None
     diagnosis_rate: dict = field(default_factory=dict)   # decimation plan (diagnosis.decimation)
     diagnosis_sample: dict = field(default_factory=dict)  # windows of a long campaign (diagnosis.sample)
+    sample_windows: list | None = None    # those windows as (run index, k0, k1) rows, for a second reading
     inputs: dict = field(default_factory=dict)  # the inputs' noise: slip smoothed, noise floor (input_hold.InputNoise)
     force_band_check: dict | None = None  # a named hysteresis against a constant-width play (force_dynamics.py)
     force_offset_check: dict | None = None  # the named causes against a force-sensor offset (force_dynamics.py)
@@ -454,11 +455,15 @@ def _same_held_out(first: Diagnosis, kw: dict) -> dict:
     hold out other spans, and the two diagnoses were then not compared at all. Measured on an
     outside generator's torque-sensor lag (36.0 ms; force chirps at 100 Hz, torque at 200 Hz):
     the held reading left 4.71 N*m and structure (`unexplained`); read linearly the sensor lag
-    was named at 35.5 ms and left 1.82 N*m (noise 1.47), on other spans, and was not kept. A
-    split the user gave, or whole windows of a sampled long log, stay as they are."""
+    was named at 35.5 ms and left 1.82 N*m (noise 1.47), on other windows, and was not kept.
+    A sampled long log's windows are chosen on the bench model's pack temperature too: the
+    second reading gets the first one's windows as well. A split the user gave stays."""
     split = getattr(first, "split", None)
-    if kw.get("held_out") or split is None or (getattr(first, "diagnosis_sample", None) or {}).get("sampled"):
+    if kw.get("held_out") or split is None:
         return kw
+    if (getattr(first, "diagnosis_sample", None) or {}).get("sampled"):
+        windows = getattr(first, "sample_windows", None)
+        return kw if windows is None else {**kw, "held_out": split, "sample_windows": windows}
     return {**kw, "held_out": split}
 
 
@@ -550,7 +555,7 @@ def _diagnose_reading(nominal: ClutchModel, bench_model: ClutchModel, runs, held
                       candidates=None, calibrate=None, progress=None, bench_info=None,
                       checkpoint=None, measured_time=None, discover=True, diagnosis_rate_hz=None,
                       fit_executor=None, sample_budget_s=SAMPLE_BUDGET_S, input_reading=None,
-                      window_states=None) -> Diagnosis:
+                      window_states=None, sample_windows=None) -> Diagnosis:
     """Diagnose a campaign given the bench-fitted model. ``input_reading``: "held" reads the
     inputs held between their samples, "linear" linearly, whatever the data say
     (``diagnose_campaign``). ``measured_time`` (default: when the torque and force topics are not
@@ -651,7 +656,7 @@ def _diagnose_reading(nominal: ClutchModel, bench_model: ClutchModel, runs, held
     args = dict(nominal=nominal, bench_model=bench_model, held_out=held_out, candidates=candidates,
                 calibrate=calibrate, say=say, emit=emit, discover=discover, fit_executor=fit_executor,
                 sample_budget_s=sample_budget_s, plan=plan, timings=timings, tick=tick, bench_info=bench_info,
-                inputs=input_info, window_states=window_states)
+                inputs=input_info, window_states=window_states, sample_windows=sample_windows)
     # a named delay or torque-sensor lag carries each lock phase's driveline torque into the
     # measured torque after it, where no clutch model can follow: those rows are left out too,
     # and the campaign diagnosed again, until the tail covers what the final model names. The
@@ -842,7 +847,8 @@ def _diagnose_masked(campaign: Campaign, locked: np.ndarray, **kw) -> "Diagnosis
 
 def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_model, held_out, candidates,
                      calibrate, say, emit, discover, fit_executor, sample_budget_s, plan, timings,
-                     tick, bench_info, inputs, window_states=None, first_step=None) -> "Diagnosis":
+                     tick, bench_info, inputs, window_states=None, first_step=None,
+                     sample_windows=None) -> "Diagnosis":
     """Stages 1 (split) to 4 of ``diagnose_campaign`` on a campaign whose locked rows are
     already NaN."""
     timings = dict(timings)
@@ -854,16 +860,17 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
     if S.plan_for(sample_budget_s, campaign):
         # long logs: the costly stages work on windows of the campaign (diagnosis.sample)
         t0 = time.perf_counter()
-        full, sampled = campaign, _Sampled.choose(campaign, nominal, bench_model, sample_budget_s)
+        full, sampled = campaign, _Sampled.choose(campaign, nominal, bench_model, sample_budget_s, sample_windows)
         campaign = sampled.campaign
         sample_info = sampled.plan.to_json()
         say(sampled.plan.describe())
         timings["sample (whole-campaign simulations)"] = time.perf_counter() - t0
-    if sampled is not None and not held_out:
+    given = bool(held_out) and not isinstance(held_out, Split)     # spans the user gave
+    if sampled is not None and not given:
         # whole windows held out, off the windows with the bench model's extreme pack temperature
-        # first (as whole runs are, below)
+        # first (as whole runs are, below); or another diagnosis' windows (_same_held_out)
         pack = [sampled.bench_pack_temperature_c[sl] for _, sl in campaign.slices()]
-        split = choose_split(campaign.runs, None, pack_temperature_c=pack, runs_are="windows")
+        split = choose_split(campaign.runs, held_out or None, pack_temperature_c=pack, runs_are="windows")
         fit_mask, eval_mask = split.masks(campaign.names, campaign.run_index, campaign.t)
     elif sampled is not None:
         split = choose_split(full.runs, held_out)          # the given spans, row by row
@@ -880,7 +887,7 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
     if not (fit_mask & scored).any():
         raise DataError("the fitted data has no measured torque outside lock-up")
     fit_runs = split.fit_runs(campaign.names)
-    if sampled is not None and held_out:       # windows with fitted rows (given spans cut them)
+    if sampled is not None and given:          # windows with fitted rows (given spans cut them)
         fit_runs = [r.name for r, sl in campaign.slices() if (fit_mask[sl] & scored[sl]).any()]
     say(f"split: {split.how}; held out {', '.join(split.labels)}"
         + (f"; {int(locked.sum())} locked rows kept out of the residuals" if locked.any() else ""))
@@ -910,7 +917,7 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
     if calibrate is not None:
         say("calibrating friction on the fitted data (regression + Monte Carlo)")
         # windows of a sample are held out whole unless the user gave the spans
-        whole = all(h.whole_run for h in split.held_out) and (sampled is None or not held_out)
+        whole = all(h.whole_run for h in split.held_out) and (sampled is None or not given)
         fit_campaign = campaign.subset(fit_runs) if whole else _masked_torque(campaign, fit_mask)
         cal_base, calibration_info = calibrate(bench_model, fit_campaign)
     if sampled is not None and (calibrate is not None or window_states is not None):
@@ -1213,6 +1220,7 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
                   split=split, fit_mask=fit_mask, eval_mask=eval_mask, locked_rows=int(locked.sum()),
                   noise=noise, bench_info=bench_info or {}, calibration_info=calibration_info, timings=timings,
                   discovery=discovery, diagnosis_rate=diagnosis_rate, diagnosis_sample=sample_info,
+                  sample_windows=None if sampled is None else list(sampled.windows),
                   inputs=inputs, force_path_check=force_dynamics, force_band_check=force_band,
                   lag_rival_checks=lag_rivals,
                   force_offset_check=force_offset, force_ceiling_check=force_ceiling,
@@ -1239,7 +1247,10 @@ class _Sampled:
     bench_pack_temperature_c: np.ndarray    # the bench model's pack temperature on the sample's rows
 
     @classmethod
-    def choose(cls, full: Campaign, nominal: ClutchModel, bench_model: ClutchModel, budget_s: float) -> "_Sampled":
+    def choose(cls, full: Campaign, nominal: ClutchModel, bench_model: ClutchModel, budget_s: float,
+               windows=None) -> "_Sampled":
+        """The sample of ``full`` within ``budget_s``: its windows chosen (sample.choose_windows),
+        or ``windows`` given ((run index, k0, k1), another diagnosis' of the same rows)."""
         from clutch_model.plant.mechanisms import apply_measurement
 
         from clutch_model.prediction import PlantInputs, initial_energy
@@ -1248,7 +1259,8 @@ class _Sampled:
         inputs = PlantInputs.of(full)
         candidates = np.unique(S.start_rows(full))
         bench = S.full_pass(bench_model, full, candidates, initial_energy(bench_model, inputs))
-        windows = S.choose_windows(full, budget_s, bench.pack_temperature_c, bench.power_w)
+        if windows is None:
+            windows = S.choose_windows(full, budget_s, bench.pack_temperature_c, bench.power_w)
         first = np.array([k0 for _, k0, _ in windows])
         at = np.searchsorted(candidates, first)
         assert np.array_equal(candidates[at], first)
