@@ -314,14 +314,16 @@ def test_the_held_reading_s_outputs_are_written_in_place_of_the_first(monkeypatc
         assert stages == [("calibrated", None), ("selected", first), ("selected", first)]
 
 
-@pytest.mark.parametrize("given,sampled,passed", [(None, False, "first"), (["b[0:10]"], False, "given"),
-                                                  (None, True, None)])
-def test_the_second_reading_holds_out_the_first_one_s_rows(monkeypatch, given, sampled, passed):
+@pytest.mark.parametrize("given,sampled,windows,passed", [(None, False, None, "first"),
+                                                          (["b[0:10]"], False, None, "given"),
+                                                          (None, True, [(0, 0, 400)], "first"),
+                                                          (None, True, None, None)])
+def test_the_second_reading_holds_out_the_first_one_s_rows(monkeypatch, given, sampled, windows, passed):
     """The automatic split keeps held-out spans off the extremes of the pack temperature the
     inputs give the bench model, so another reading may pick other spans, and two diagnoses on
     other rows are never compared (_second_better). The second reading is given the first
-    one's split (engine._same_held_out); a split the user gave, or the windows of a sampled
-    long log, stay as they are. choose_split keeps a Split it is given."""
+    one's split (engine._same_held_out), and a sampled long log's windows with it; a split the
+    user gave stays as it is. choose_split keeps a Split it is given."""
     from types import SimpleNamespace
 
     import clutch_model.diagnosis.engine as engine
@@ -329,19 +331,19 @@ def test_the_second_reading_holds_out_the_first_one_s_rows(monkeypatch, given, s
 
     split = Split([HeldOut("a", 10.0, 20.0)], 0.5, "time spans")
     first = _diagnosis(closest=["torque_sensor_lag"], extended=31.1, closest_rmse=5.185)
-    first.split, first.diagnosis_sample = split, {"sampled": sampled}
+    first.split, first.diagnosis_sample, first.sample_windows = split, {"sampled": sampled}, windows
     second = _diagnosis(causes=["torque_sensor_lag"], extended=5.0)
     asked = []
 
     def fake(nominal, bench_model, campaign, checkpoint=None, input_reading=None, **kw):
-        asked.append(kw.get("held_out"))
+        asked.append((kw.get("held_out"), kw.get("sample_windows")))
         return second if input_reading == "held" else first
 
     monkeypatch.setattr(engine, "_diagnose_reading", fake)
     _, campaign = _log(True, seed=8, duration_s=1.0)
     engine.diagnose_campaign(None, None, campaign, held_out=given)
-    assert asked[0] == given
-    assert asked[1] is {"first": split, "given": given, None: None}[passed]
+    assert asked[0] == (given, None)
+    assert asked[1][0] is {"first": split, "given": given, None: None}[passed]
+    assert asked[1][1] == (windows if passed == "first" else None)
     runs = [SimpleNamespace(name="a", t=np.arange(100.0), duration_s=99.0)]
     assert choose_split(runs, split) is split
-
