@@ -347,3 +347,28 @@ def test_the_second_reading_holds_out_the_first_one_s_rows(monkeypatch, given, s
     assert asked[1][1] == (windows if passed == "first" else None)
     runs = [SimpleNamespace(name="a", t=np.arange(100.0), duration_s=99.0)]
     assert choose_split(runs, split) is split
+
+
+def test_a_rival_that_wins_under_one_reading_only_does_not_take_the_catalog_s_name():
+    """The first reading's named causes lost the name to a rival beyond the catalog; the second
+    reading names the same causes: the rival's win hangs on the reading and the second is kept
+    (engine._other_reading_better, _rival_overruled; an outside transport delay with a drag,
+    the force logged on change: a force delay took the name at t = 4.7 read held, tied read
+    linearly). Another set of causes, or no rival behind the verdict, keeps the 2 % bar."""
+    from clutch_model.diagnosis.engine import _other_reading_better, _rival_overruled
+
+    rival = {"force_delay": {"took_the_name": True, "held_out_rmse": 2.07}}
+    first = _diagnosis(closest=["transport_delay", "drag_torque"], closest_rmse=2.095)
+    first.selection.closest_leaves.update(rival)
+    assert _rival_overruled(first) == "force_delay"
+    same = _diagnosis(causes=["drag_torque", "transport_delay"], extended=2.204)
+    kept, why = _other_reading_better(first, same, "linear")
+    assert kept and "force delay" in why
+    # the rival did not take the name: an unexplained closest chain, the 2 % bar as before
+    lost = _diagnosis(closest=["transport_delay", "drag_torque"], closest_rmse=2.095)
+    lost.selection.closest_leaves["force_delay"] = {"took_the_name": False}
+    assert not _rival_overruled(lost) and not _other_reading_better(lost, same, "linear")[0]
+    # the second reading names other causes than those the rival overruled
+    assert not _other_reading_better(first, _diagnosis(causes=["transport_delay"], extended=2.2), "linear")[0]
+    assert not _other_reading_better(first, _diagnosis(causes=["actuator_lag", "drag_torque"], extended=2.2),
+                                     "linear")[0]
