@@ -1471,8 +1471,8 @@ def material_refused(discovery: DiscoveryOutcome, data: SelectionData, campaign:
     `unexplained`. The discovered model cut the written model's held-out mean square by 42 %
     (12.78 -> 9.73 N*m), as the friction it refits with the terms followed the drifting level
     (the friction refitted alone: 12.86); the three terms alone cut it by 5.4 % and the ripple's
-    two by 1.6 %. Terms that leave
-    structure themselves (no named cause) stay material: what they leave is not noise either."""
+    two by 1.9 %. Terms that leave structure themselves (no named cause) stay material: what
+    they leave is not noise either."""
     if discovery.cause is None:
         return True
     terms = list(discovery.cause.parameters)
