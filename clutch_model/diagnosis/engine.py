@@ -991,6 +991,7 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
                              {"force": campaign.force, "slip": np.abs(campaign.slip),
                               "pack temperature": sim_cal.pack_temperature_c}, fit_mask & scored))
     data.per_run_feature_names, data.per_run_features = ripple_columns(campaign, calibrated.predicted)
+    data.reading_spread_nm = float(inputs.get("difference_rms_nm") or 0.0)
     outside = int(data.test_mask.sum() - data.interpolation_test_mask.sum())
     inputs = {**inputs, "held_out_rows_outside_fitted_range": outside}
     if outside:
