@@ -1189,7 +1189,7 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
         extended_model = whole.model
         predicted = np.asarray(whole.predict(data), float)
         extended_fit = _DiscoveredExtension(extended_model, campaign.torque_measured - predicted, predicted)
-        if any("energy" in tid for tid in found.parameters):
+        if energy_terms(found.parameters):
             from clutch_model.discovery.identify import _record_energy_history as record_discovered_energy
 
             record_discovered_energy(extended_model, campaign if full is None else full)
@@ -1477,7 +1477,7 @@ def material_refused(discovery: DiscoveryOutcome, data: SelectionData, campaign:
     if discovery.cause is None:
         return True
     terms = list(discovery.cause.parameters)
-    unchecked = [t for t in terms if "slip_angle" in t or "energy" in t] or terms
+    unchecked = [t for t in terms if t in angle_terms(terms) + energy_terms(terms)] or terms
     cuts = {"the discovered model": _written_cut(discovery, data, campaign, written.residual, eval_mask)[:3],
             f"{', '.join(unchecked)} alone": terms_own_cut(unchecked, data, campaign, written, sim_written,
                                                            eval_mask)}
@@ -1627,6 +1627,18 @@ def held_out_whole_bags(bag_of_row: np.ndarray, train_mask: np.ndarray, test_mas
     return bool(np.setdiff1d(held, trained).size)
 
 
+def angle_terms(terms) -> list:
+    """The terms of a discovered extension that follow the slip angle (a ripple's phase, which
+    restarts with each bag)."""
+    return [t for t in terms if "slip_angle" in t]
+
+
+def energy_terms(terms) -> list:
+    """The terms of a discovered extension that follow the energy dissipated so far (a clock
+    over the campaign)."""
+    return [t for t in terms if "energy" in t]
+
+
 def phase_unchecked(terms, whole_bag_held_out: bool) -> str:
     """Why a discovered extension with slip-angle terms cannot be checked, or ''.
 
@@ -1638,7 +1650,7 @@ def phase_unchecked(terms, whole_bag_held_out: bool) -> str:
     the gain on the unseen bags was +92, +22, -1 and -90 %; with whole runs held out it was
     never accepted. Such an extension needs a bag held out whole (``held_out_whole_bags``:
     the windows of a sampled long log are runs of the sample but share their bag's origin)."""
-    angle = [t for t in terms if "slip_angle" in t]
+    angle = angle_terms(terms)
     if not angle or whole_bag_held_out:
         return ""
     return (f"the discovered terms ({', '.join(angle)}) follow the slip angle, which restarts with each bag, "
@@ -1659,7 +1671,7 @@ def phase_differs_between_runs(data: SelectionData, resid: np.ndarray, terms) ->
     t = 13.0 and made the unseen bags worse (31.5 -> 53.9 N*m); fitted on the other two, it
     predicts one of the three fitted runs."""
     X = data.per_run_features
-    if X is None or not any("slip_angle" in t for t in terms):
+    if X is None or not angle_terms(terms):
         return ""
     resid = np.asarray(resid, float)
     rows = np.asarray(data.train_mask, bool) & np.isfinite(resid) & np.all(np.isfinite(X), axis=1)
@@ -1693,7 +1705,7 @@ def energy_unchecked(terms, whole_bag_held_out: bool) -> str:
     first searches again without them): beside another term it is still not checked beyond
     the energies it was fitted on, which the replay on later bags is. A catalog
     friction_degradation is unaffected."""
-    if whole_bag_held_out or not any("energy" in t for t in terms):
+    if whole_bag_held_out or not energy_terms(terms):
         return ""
     return (f"the discovered terms ({', '.join(terms)}) follow the energy dissipated so far, which grows "
             f"over the campaign like a clock, and only time spans of the fitted runs are held out: they cannot be "
@@ -1703,7 +1715,7 @@ def energy_unchecked(terms, whole_bag_held_out: bool) -> str:
 
 def energy_only(terms) -> bool:
     """Every term of a discovered extension follows the energy dissipated so far."""
-    return bool(terms) and all("energy" in t for t in terms)
+    return bool(terms) and len(energy_terms(terms)) == len(terms)
 
 
 WITHIN_RUN_WORSE_P = 0.05   # a named degradation whose within-run forecast is this significantly worse is refused
