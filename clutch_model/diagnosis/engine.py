@@ -32,6 +32,7 @@ from clutch_model.replay import replay_runs
 from clutch_model.formats.bag_reader import Campaign
 from clutch_model.plant.mechanisms import CATALOG
 from clutch_model.diagnosis.decimation import choose_diagnosis_rate, decimate_campaign
+from clutch_model.diagnosis.receive_bursts import find_receive_bursts
 from clutch_model.diagnosis.torque_clock import choose_torque_stamps, clock_ticks, with_torque_stamps
 from clutch_model.diagnosis.measured_time import (choose_plant_grid, measured_time_campaign, topics_unaligned,
                                                   without_plant_grid)
@@ -300,6 +301,12 @@ def diagnose_campaign(nominal: ClutchModel, bench_model: ClutchModel, runs, held
               diagnosis_rate_hz=diagnosis_rate_hz, fit_executor=fit_executor, sample_budget_s=sample_budget_s)
     campaign = runs if isinstance(runs, Campaign) else Campaign(list(runs))
     del runs
+    # topics a gateway forwarded in bursts: their samples re-timed at their period (receive_bursts)
+    bursts = find_receive_bursts(campaign)
+    if bursts.found:
+        (progress or (lambda msg: None))(bursts.describe())
+        campaign = bursts.apply(campaign)
+        kw["received_in_bursts"] = bursts.to_dict()
     first = _diagnose_readings(nominal, bench_model, campaign, checkpoint=checkpoint, **kw)
     states = _window_state_model(first)
     if states is None:
@@ -580,8 +587,9 @@ def _diagnose_reading(nominal: ClutchModel, bench_model: ClutchModel, runs, held
                       candidates=None, calibrate=None, progress=None, bench_info=None,
                       checkpoint=None, measured_time=None, discover=True, diagnosis_rate_hz=None,
                       fit_executor=None, sample_budget_s=SAMPLE_BUDGET_S, input_reading=None,
-                      window_states=None, sample_windows=None) -> Diagnosis:
-    """Diagnose a campaign given the bench-fitted model. ``input_reading``: "held" reads the
+                      window_states=None, sample_windows=None, received_in_bursts=None) -> Diagnosis:
+    """Diagnose a campaign given the bench-fitted model. ``received_in_bursts``: how the topics
+    re-timed before (``ReceiveBursts.to_dict``) came, for the report. ``input_reading``: "held" reads the
     inputs held between their samples, "linear" linearly, whatever the data say
     (``diagnose_campaign``). ``measured_time`` (default: when the torque and force topics are not
     aligned) compares model and measurement at the measured torque's own stamps
@@ -616,7 +624,7 @@ def _diagnose_reading(nominal: ClutchModel, bench_model: ClutchModel, runs, held
     # prediction: the plant is driven by the slip smoothed without phase (input_hold)
     input_noise = decide_input_noise(campaign, nominal)
     say(input_noise.describe())
-    input_info = {**input_noise.to_dict(), **rails.to_dict()}
+    input_info = {**input_noise.to_dict(), **rails.to_dict(), **(received_in_bursts or {})}
     if input_noise.smoothed:
         campaign = with_smoothed_slip(campaign, input_noise.sigma_s)
     input_info["force_sample_period_s"] = force_sample_period_s(campaign)
