@@ -51,14 +51,18 @@ LAB_CLOCKS = {ch: TopicClock(200.0) for ch in ("applied_force", "slip_speed", "s
 # a torque sensor sampling at 125 Hz on its own clock, its frames stamped as they arrive (up to
 # 2.8 ms, 35 % of the period, either side of the instant the value was taken)
 GATEWAY_TORQUE_CLOCK = TopicClock(125.0, arrival_jitter_s=2.8e-3, quantum_s=1e-4)
+# force and torque sampled at 200 Hz, their frames forwarded by a gateway in bursts every 10-20 ms
+BURST_CLOCKS = {"applied_force": TopicClock(200.0, jitter_s=0.2e-3, quantum_s=1e-4, burst_s=0.015),
+                "measured_torque": TopicClock(200.0, jitter_s=0.2e-3, quantum_s=1e-4, burst_s=0.015)}
 
 
 @dataclass(frozen=True)
 class Condition:
     """How the data look. ``clocks``: "lab" (every topic at 200 Hz on one grid, no jitter),
     "car" (the car-log defaults: force 200 Hz ±1 ms, slip 100 Hz, torque 50 Hz ±1 ms, sump
-    10 Hz, topics unaligned) or "gateway" (the car's, the torque at 125 Hz stamped on arrival,
-    ``GATEWAY_TORQUE_CLOCK``). ``torque_noise``: (kind, options) of the torque sensor's noise,
+    10 Hz, topics unaligned), "gateway" (the car's, the torque at 125 Hz stamped on arrival,
+    ``GATEWAY_TORQUE_CLOCK``) or "bursts" (the car's, force and torque forwarded in bursts,
+    ``BURST_CLOCKS``). ``torque_noise``: (kind, options) of the torque sensor's noise,
     σ = 8 N·m. ``size`` / ``quick_size``: (runs diagnose sees, later runs it never sees,
     run duration s)."""
 
@@ -93,6 +97,8 @@ class Condition:
             kw.update(clocks=dict(LAB_CLOCKS), random_phase=False)
         elif self.clocks == "gateway":
             kw.update(clocks=dict(DEFAULT_CLOCKS, measured_torque=GATEWAY_TORQUE_CLOCK))
+        elif self.clocks == "bursts":
+            kw.update(clocks=dict(DEFAULT_CLOCKS, **BURST_CLOCKS))
         return kw
 
     def seen_runs(self, quick: bool = False) -> int:
@@ -107,6 +113,9 @@ CONDITIONS = {c.name: c for c in (
     Condition("gateway", "topics on their own clocks, the torque sampled at 125 Hz on its sensor's clock and "
                          "stamped as its frames arrive (±2.8 ms around the instant sampled)", "unaligned",
               clocks="gateway"),
+    Condition("bursts", "topics on their own clocks, force and torque sampled at 200 Hz and forwarded by a "
+                        "gateway in bursts every 10-20 ms (the frames of a burst 1 µs apart)", "unaligned",
+              clocks="bursts"),
     Condition("ar1", "coloured torque noise AR(1) φ 0.95, σ 8 N·m", "coloured-noise",
               torque_noise=("ar1", {"phi": 0.95})),
     Condition("lowpass", "band-limited torque noise (2nd-order 10 Hz)", "filtered-noise",

@@ -35,7 +35,10 @@ class TopicClock:
     the order). quantum_s: log-time resolution (stamps rounded to it; 0 = ns).
     arrival_jitter_s: half-width of the uniform scatter of the stamps around the sampling
     instants (a gateway stamping the frames as they arrive, the value still the signal at the
-    instant it was sampled; 0 = stamped when sampled).
+    instant it was sampled; 0 = stamped when sampled). burst_s: a gateway forwards the frames
+    in bursts, flushing every ``burst_s`` on average (2/3 to 4/3 of it, uniform): each frame
+    is stamped at the first flush after it was sampled, the frames of one flush 1 µs apart
+    (0 = no bursts).
     """
 
     rate_hz: float
@@ -43,11 +46,12 @@ class TopicClock:
     jitter_s: float = 0.0
     quantum_s: float = 0.0
     arrival_jitter_s: float = 0.0
+    burst_s: float = 0.0
 
     def __post_init__(self):
         if not (0 < self.rate_hz <= 10000):
             raise ParamsError(f"topic clock: rate {self.rate_hz} Hz out of (0, 10000]")
-        if self.jitter_s < 0 or self.quantum_s < 0 or self.arrival_jitter_s < 0:
+        if self.jitter_s < 0 or self.quantum_s < 0 or self.arrival_jitter_s < 0 or self.burst_s < 0:
             raise ParamsError("topic clock: jitter and quantum must be >= 0")
         if self.jitter_s + self.arrival_jitter_s >= 0.5 / self.rate_hz:
             raise ParamsError(f"topic clock: jitter ±{self.jitter_s + self.arrival_jitter_s} s must be below half "
@@ -65,14 +69,30 @@ class TopicClock:
                    if self.arrival_jitter_s > 0 else 0.0)
         q = self.quantum_s if self.quantum_s > 0 else 1e-9
         t_stamp = np.round(np.clip(t_true + arrival, 0.0, duration_s - 1e-9) / q) * q
+        if self.burst_s > 0 and t_stamp.size:
+            t_stamp = self._forwarded_in_bursts(rng, t_stamp, duration_s, q)
         keep = np.concatenate([[True], np.diff(t_stamp) > 0.5e-9]) if t_stamp.size else np.zeros(0, bool)
         return t_true[keep], t_stamp[keep]
+
+    def _forwarded_in_bursts(self, rng, t_stamp, duration_s: float, q: float) -> np.ndarray:
+        """Stamps at the gateway's flushes (``burst_s``): the first flush at or after each
+        sample, its frames 1 µs apart; frames after the last flush go with the run's end."""
+        n = int(np.ceil(duration_s / (self.burst_s * 2.0 / 3.0))) + 1
+        flushes = np.round(np.cumsum(rng.uniform(2.0 / 3.0, 4.0 / 3.0, n) * self.burst_s) / q) * q
+        j = np.searchsorted(flushes, t_stamp)
+        at = np.where(j < flushes.size, flushes[np.minimum(j, flushes.size - 1)], t_stamp[-1])
+        first = np.r_[True, at[1:] != at[:-1]]
+        idx = np.arange(at.size)
+        pos = idx - np.maximum.accumulate(np.where(first, idx, 0))
+        return np.minimum(at + pos * 1e-6, duration_s - 1e-9)
 
     def to_dict(self) -> dict:
         out = {"rate_hz": self.rate_hz, "phase_s": self.phase_s, "jitter_s": self.jitter_s,
                "quantum_s": self.quantum_s}
         if self.arrival_jitter_s > 0:
             out["arrival_jitter_s"] = self.arrival_jitter_s
+        if self.burst_s > 0:
+            out["burst_s"] = self.burst_s
         return out
 
 

@@ -39,6 +39,7 @@ MC_SAMPLES = 40          # Monte Carlo samples of the car calibration (CI budget
 FAST = [
     ("unaligned", "none", 31),                       # topics on own clocks: no false transport_delay
     ("gateway", "none", 2),                          # the torque stamped on arrival (torque_clock)
+    ("bursts", "none", 1),                           # force and torque forwarded in bursts (receive_bursts)
     ("ar1", "none", 32),                             # AR(1) phi 0.95 noise is not structure
     ("lowpass", "none", 33),                         # band-limited noise is not structure
     ("lockup", "spring_preload", 34),                # lock phases kept out
