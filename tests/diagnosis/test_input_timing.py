@@ -202,8 +202,8 @@ def test_the_held_reading_is_tried_only_where_a_time_mechanism_left_it_open():
 def test_the_linear_reading_is_tried_where_the_held_weight_may_be_a_delay():
     """The mirror of the held retry (engine._reading_taken_held): where the data took the held
     reading by a weight a delay of a few half force periods gives too (0.5 < beta <= the bar),
-    and the diagnosis names a time mechanism, or names nothing with one as its closest candidate
-    or its first step's best, the campaign is diagnosed again read linearly. Not for `none`,
+    and the diagnosis names a time mechanism or a preload, or names nothing with one as its
+    closest candidate or its first step's best, the campaign is diagnosed again read linearly. Not for `none`,
     nor where the held reading was forced (weight under 0.5), nor above the bar (read linearly
     already)."""
     from types import SimpleNamespace
@@ -220,6 +220,10 @@ def test_the_linear_reading_is_tried_where_the_held_weight_may_be_a_delay():
     assert not _reading_taken_held(_diagnosis(closest=["actuator_hysteresis"], inputs=held,
                                               candidates=[fit("actuator_hysteresis", 5.0), fit("transport_delay", 5.8)]))
     assert not _reading_taken_held(_diagnosis(causes=["drag_torque"], inputs=held))
+    # a preload moves the weight too (the bench model it is read with has none): named, or closest
+    assert _reading_taken_held(_diagnosis(causes=["spring_preload"], inputs=held))
+    assert _reading_taken_held(_diagnosis(closest=["spring_preload", "discovered"], inputs=held))
+    assert not _reading_taken_held(_diagnosis(closest=["spring_preload"], inputs=held, verdict="none"))
     assert not _reading_taken_held(_diagnosis(closest=["actuator_lag"], inputs=held, verdict="none",
                                               candidates=[fit("transport_delay", 5.8)]))
     assert not _reading_taken_held(_diagnosis(inputs=held))
