@@ -7,9 +7,8 @@ from clutch_model.diagnosis.measured_time import measured_time_campaign
 from clutch_model.diagnosis.receive_bursts import find_receive_bursts, retimed, topic_bursts
 from clutch_model.formats.bag_reader import Campaign, read_bag
 from clutch_model.formats.bag_writer import write_run_bag
-from clutch_model.plant.params import load_model
-from clutch_model.plant.simulate import simulate
-from clutch_model.prediction import predict_campaign
+
+from .chirp_run import chirp_truth, force_n, rms_off, slip_rad_s
 
 PERIOD_S = 1.0 / 200.0
 
@@ -64,28 +63,17 @@ def test_clocks_event_logging_and_duplicates_are_not_bursts():
 def _bag(tmp_path, seed=3):
     """A 6 s run: force and torque sampled at 200 Hz on their own clocks (a force chirp, 2 N*m
     of torque noise), both forwarded in bursts every 10-20 ms; slip at 1 kHz, sump at 10 Hz."""
-    model = load_model(None)
+    model, fine, truth = chirp_truth()
     rng = np.random.default_rng(seed)
-    force = lambda t: 7000.0 + 4000.0 * np.sin(2 * np.pi * (0.5 + 0.6 * t) * t)   # noqa: E731
-    slip = lambda t: 6.0 + 2.0 * np.sin(2 * np.pi * 0.7 * t)                      # noqa: E731
-    fine = np.arange(0.0, 6.0, 1e-4)
-    truth = simulate(model, fine, force(fine), slip(fine), 60.0).torque_nm
     flushes = _bursts(rng, 6.5)
     tf = 0.0013 + PERIOD_S * np.arange(int(5.9 / PERIOD_S))
     tq = 0.0037 + PERIOD_S * np.arange(int(5.9 / PERIOD_S))
     torque = np.interp(tq, fine, truth) + rng.normal(0.0, 2.0, tq.size)
     tl, ts = np.arange(0.0, 6.0, 0.001), np.arange(0.0, 6.0, 0.1)
-    write_run_bag(tmp_path / "b", {"applied_force": (_received(tf, flushes), force(tf)),
-                                   "slip_speed": (tl, slip(tl)), "sump_temperature": (ts, np.full(ts.size, 60.0)),
+    write_run_bag(tmp_path / "b", {"applied_force": (_received(tf, flushes), force_n(tf)),
+                                   "slip_speed": (tl, slip_rad_s(tl)), "sump_temperature": (ts, np.full(ts.size, 60.0)),
                                    "measured_torque": (_received(tq, flushes), torque)})
     return model, read_bag(tmp_path / "b")
-
-
-def _rms_off(model, camp):
-    p = predict_campaign(model, camp).torque_nm
-    y = camp.torque_measured
-    ok = np.isfinite(y) & (camp.t > 0.3)
-    return float(np.sqrt(np.mean((p - y)[ok] ** 2)))
 
 
 def test_a_bag_received_in_bursts_is_compared_at_the_instants_sampled(tmp_path):
@@ -105,6 +93,6 @@ def test_a_bag_received_in_bursts_is_compared_at_the_instants_sampled(tmp_path):
     # the true model meets the torque to about its noise (2 N*m; 3.1 measured, the rest the 0.4 ms
     # on the way) at the instants re-timed; as logged, the force staircase and the late torque put
     # it off by the torque's rate times the wait (52 N*m)
-    at_instants = _rms_off(model, with_midpoint_force(measured_time_campaign(retimed_camp, rate_hz=1000.0)))
-    as_logged = _rms_off(model, with_midpoint_force(measured_time_campaign(Campaign([run]), rate_hz=1000.0)))
+    at_instants = rms_off(model, with_midpoint_force(measured_time_campaign(retimed_camp, rate_hz=1000.0)))
+    as_logged = rms_off(model, with_midpoint_force(measured_time_campaign(Campaign([run]), rate_hz=1000.0)))
     assert at_instants < 4.0 and as_logged > 5.0 * at_instants, (at_instants, as_logged)

@@ -9,8 +9,8 @@ from clutch_model.diagnosis.torque_clock import (choose_torque_stamps, clock_tic
                                                  with_torque_stamps)
 from clutch_model.formats.bag_reader import read_bag
 from clutch_model.formats.bag_writer import write_run_bag
-from clutch_model.plant.params import load_model
-from clutch_model.plant.simulate import simulate
+
+from .chirp_run import chirp_truth, force_n, rms_off, slip_rad_s
 
 PERIOD_S = 1.0 / 125.0
 
@@ -49,18 +49,14 @@ def _bag(tmp_path, on_arrival: bool, seed=3):
     """A 6 s run: force and slip at 1 kHz (a force chirp), the torque at 125 Hz with 2 N*m of
     noise, its stamps scattered +-2.8 ms. ``on_arrival``: the values taken at the clock's ticks
     (a gateway stamping frames as they arrive); else at the stamps (irregular sampling)."""
-    model = load_model(None)
+    model, fine, truth = chirp_truth()
     rng = np.random.default_rng(seed)
-    force = lambda t: 7000.0 + 4000.0 * np.sin(2 * np.pi * (0.5 + 0.6 * t) * t)   # noqa: E731
-    slip = lambda t: 6.0 + 2.0 * np.sin(2 * np.pi * 0.7 * t)                      # noqa: E731
-    fine = np.arange(0.0, 6.0, 1e-4)
-    truth = simulate(model, fine, force(fine), slip(fine), 60.0).torque_nm
     ticks = 0.0031 + PERIOD_S * np.arange(int(5.9 / PERIOD_S))
     stamps = ticks + rng.uniform(-0.35, 0.35, ticks.size) * PERIOD_S
     taken = ticks if on_arrival else stamps
     values = np.interp(taken, fine, truth) + rng.normal(0.0, 2.0, ticks.size)
     tf, ts = np.arange(0.0, 6.0, 0.001), np.arange(0.0, 6.0, 0.1)
-    write_run_bag(tmp_path / "b", {"applied_force": (tf, force(tf)), "slip_speed": (tf, slip(tf)),
+    write_run_bag(tmp_path / "b", {"applied_force": (tf, force_n(tf)), "slip_speed": (tf, slip_rad_s(tf)),
                                    "sump_temperature": (ts, np.full(ts.size, 60.0)),
                                    "measured_torque": (stamps, values)})
     return model, read_bag(tmp_path / "b"), ticks, fine, truth
@@ -79,7 +75,7 @@ def test_values_taken_on_the_clock_are_compared_at_its_ticks(tmp_path):
     # the plant stepping from row to row at 125 Hz); at the stamps it is off by the torque's rate
     # times the scatter (14.6 N*m)
     at_ticks = with_midpoint_force(measured_time_campaign(with_torque_stamps(_campaign([run]), found), rate_hz=1.0))
-    assert _rms_off(model, at_ticks) < 4.0 and _rms_off(model, camp) > 10.0
+    assert rms_off(model, at_ticks) < 4.0 and rms_off(model, camp) > 10.0
 
 
 def test_values_taken_at_their_stamps_stay_there(tmp_path):
@@ -89,7 +85,7 @@ def test_values_taken_at_their_stamps_stay_there(tmp_path):
     camp = with_midpoint_force(measured_time_campaign([run], rate_hz=1.0))
     choice = choose_torque_stamps(camp, model, found, noise_nm=2.0)
     assert not choice.on_clock and abs(choice.beta) < 0.2, choice
-    assert _rms_off(model, camp) < 4.0
+    assert rms_off(model, camp) < 4.0
 
 
 def _campaign(runs):
@@ -97,9 +93,3 @@ def _campaign(runs):
     return Campaign(list(runs))
 
 
-def _rms_off(model, camp):
-    from clutch_model.prediction import predict_campaign
-    p = predict_campaign(model, camp).torque_nm
-    y = camp.torque_measured
-    ok = np.isfinite(y) & (camp.t > 0.3)
-    return float(np.sqrt(np.mean((p - y)[ok] ** 2)))
