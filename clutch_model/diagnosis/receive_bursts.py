@@ -26,9 +26,11 @@ message at its log time, so an extended model is replayed on the inputs as logge
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
+
+from clutch_model.formats.bag_reader import Campaign, run_with_samples
 
 BURST_GAP_S = 0.5e-3         # a message within this (and a tenth of the mean interval) of the one before is in its burst
 BURSTY_SHARE = 0.3           # ... for at least this share of a topic's messages: received in bursts
@@ -71,13 +73,34 @@ def topic_bursts(t) -> TopicBursts | None:
     if share < BURSTY_SHARE:
         return TopicBursts(share)
     counts = ends - starts
-    between = np.diff(t[ends - 1])                           # from one burst's log time to the next
+    w = t[ends - 1]                                          # each burst's log time
+    between = np.diff(w)
     if between.size < 2:
         return TopicBursts(share)
     typical = float(np.median(between))
     normal = between <= BURST_GAP_OUTLIER * typical
     period = float(np.sum(between[normal]) / np.sum(counts[1:][normal]))
-    return TopicBursts(share, typical, refined_period(t, period))
+    return TopicBursts(share, typical, refined_period(w, counts, period))
+
+
+def _phases(period_s: float) -> np.ndarray:
+    """The grid phases tried over one sample period."""
+    return (np.arange(PHASE_STEPS) + 0.5) / PHASE_STEPS * period_s
+
+
+def _windows(n: int):
+    """Each window of PHASE_WINDOW bursts (from the second: a burst is counted from the one before)."""
+    for a in range(1, n, PHASE_WINDOW):
+        yield np.arange(a, min(a + PHASE_WINDOW, n))
+
+
+def _grid_counts(w: np.ndarray, counts: np.ndarray, idx: np.ndarray, thetas: np.ndarray, period_s: float):
+    """For grids of phases ``thetas`` (rows) and the bursts ``idx`` (columns): whether the burst
+    holds as many grid instants since the burst before it as it holds messages, and the number
+    of its last grid instant -> (meets, now)."""
+    now = np.floor((w[idx][None, :] - thetas[:, None]) / period_s)
+    before = np.floor((w[idx - 1][None, :] - thetas[:, None]) / period_s)
+    return (now - before) == counts[idx][None, :], now
 
 
 def _grid_phase_last(w: np.ndarray, counts: np.ndarray, period_s: float) -> np.ndarray:
@@ -88,48 +111,35 @@ def _grid_phase_last(w: np.ndarray, counts: np.ndarray, period_s: float) -> np.n
     (the centre of the phases that do best). A burst whose count it meets gets the grid instant
     at or before its log time; the others (a lost frame, a phase no window agrees on) NaN."""
     last = np.full(w.size, np.nan)
-    thetas = (np.arange(PHASE_STEPS) + 0.5) / PHASE_STEPS * period_s
-    for a in _windows(w.size):
-        idx = np.arange(a, min(a + PHASE_WINDOW, w.size))
-        grid_now = np.floor((w[idx][None, :] - thetas[:, None]) / period_s)
-        grid_before = np.floor((w[idx - 1][None, :] - thetas[:, None]) / period_s)
-        meets = (grid_now - grid_before) == counts[idx][None, :]
-        share = meets.mean(axis=1)
+    thetas = _phases(period_s)
+    for idx in _windows(w.size):
+        share = _grid_counts(w, counts, idx, thetas, period_s)[0].mean(axis=1)
         if share.max() < PHASE_MATCH:
             continue
         best = share >= share.max() - 1e-12
         theta = float(np.angle(np.mean(np.exp(2j * np.pi * thetas[best] / period_s)))) / (2 * np.pi) * period_s
         theta %= period_s
-        now, before = np.floor((w[idx] - theta) / period_s), np.floor((w[idx - 1] - theta) / period_s)
-        ok = (now - before) == counts[idx]
-        last[idx[ok]] = theta + now[ok] * period_s
+        meets, now = _grid_counts(w, counts, idx, np.array([theta]), period_s)
+        ok = meets[0]
+        last[idx[ok]] = theta + now[0][ok] * period_s
     return last
-
-
-def _windows(n: int):
-    return range(1, n, PHASE_WINDOW)
 
 
 def _phase_share(w: np.ndarray, counts: np.ndarray, period_s: float) -> float:
     """The mean over windows of the largest share of bursts a grid phase accounts for."""
-    thetas = (np.arange(PHASE_STEPS) + 0.5) / PHASE_STEPS * period_s
-    shares = []
-    for a in _windows(w.size):
-        idx = np.arange(a, min(a + PHASE_WINDOW, w.size))
-        grid = (np.floor((w[idx][None, :] - thetas[:, None]) / period_s)
-                - np.floor((w[idx - 1][None, :] - thetas[:, None]) / period_s))
-        shares.append(float(np.max(np.mean(grid == counts[idx][None, :], axis=1))))
+    thetas = _phases(period_s)
+    shares = [float(np.max(np.mean(_grid_counts(w, counts, idx, thetas, period_s)[0], axis=1)))
+              for idx in _windows(w.size)]
     return float(np.mean(shares)) if shares else 0.0
 
 
-def refined_period(t, period_s: float) -> float:
+def refined_period(w: np.ndarray, counts: np.ndarray, period_s: float) -> float:
     """The sample period that lets a grid account for the most bursts (``_phase_share``) within
-    PERIOD_REFINE of ``period_s``, on the first PERIOD_REFINE_BURSTS bursts: the period from the
-    bursts' span is off by up to two periods over the span (0.2 % on a 6 s bag), which moves
-    the grid by a third of a period over a window of bursts."""
-    t = np.asarray(t, float)
-    starts, ends = _bursts(t)
-    w, counts = t[ends - 1][:PERIOD_REFINE_BURSTS], (ends - starts)[:PERIOD_REFINE_BURSTS]
+    PERIOD_REFINE of ``period_s``, on the first PERIOD_REFINE_BURSTS bursts (their log times
+    ``w`` and message ``counts``): the period from the bursts' span is off by up to two periods
+    over the span (0.2 % on a 6 s bag), which moves the grid by a third of a period over a
+    window of bursts."""
+    w, counts = w[:PERIOD_REFINE_BURSTS], counts[:PERIOD_REFINE_BURSTS]
     periods = period_s * (1.0 + np.linspace(-PERIOD_REFINE, PERIOD_REFINE, 41))
     share = np.array([_phase_share(w, counts, p) for p in periods])
     best = share >= share.max() - 1e-12
@@ -186,9 +196,7 @@ class ReceiveBursts:
 
     def apply(self, campaign):
         """The campaign with every burst-received topic re-timed (``retimed``) and each run put on
-        the replay grid of its re-timed samples."""
-        from clutch_model.formats.bag_reader import Campaign
-
+        the replay grid of its re-timed samples (``bag_reader.run_with_samples``)."""
         return Campaign([self._run(r) for r in campaign.runs])
 
     def _run(self, run):
@@ -199,23 +207,7 @@ class ReceiveBursts:
         for chan, b in per.items():
             t, v = samples[chan]
             samples[chan] = (retimed(t, b.period_s), v)
-        return run_on_grid(run, samples)
-
-
-def run_on_grid(run, samples: dict):
-    """``run`` with its samples replaced and its replay-grid rows rebuilt from them (a row at
-    every force sample from the first instant every input has started, each input and the
-    measured torque and pack temperature the latest sample at or before it)."""
-    from clutch_model.formats.bag_reader import latest_sample, replay_grid
-
-    rows, force, slip, sump = replay_grid(samples["applied_force"], samples["slip_speed"],
-                                          samples["sump_temperature"])
-    extra = {}
-    for attr, chan in (("torque_measured_nm", "measured_torque"), ("pack_temperature_measured_c", "pack_temperature")):
-        if chan in samples:
-            extra[attr] = latest_sample(*samples[chan], rows)
-    return replace(run, t=rows, applied_force_n=force, slip_speed_rad_s=slip, sump_temperature_c=sump,
-                   samples=samples, **extra)
+        return run_with_samples(run, samples)
 
 
 def find_receive_bursts(campaign) -> ReceiveBursts:

@@ -8,7 +8,7 @@ dropped here too, so offline replay and the live node see the same inputs.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -209,6 +209,22 @@ def replay_grid(force, slip, sump) -> tuple:
     start = max(force[0][0], slip[0][0], sump[0][0])
     rows = force[0][force[0] >= start]
     return rows, latest_sample(*force, rows), latest_sample(*slip, rows), latest_sample(*sump, rows)
+
+
+def run_with_samples(run: Run, samples: dict) -> Run:
+    """``run`` with its samples (``Run.samples``, times in s) replaced and its replay-grid rows
+    rebuilt from them (``replay_grid``; the measured torque and pack temperature the latest
+    sample at or before each row): a diagnosis that re-times a topic (e.g. one received in
+    bursts) puts the run back on the grid ``read_bag`` builds."""
+    rows, force, slip, sump = replay_grid(samples["applied_force"], samples["slip_speed"],
+                                          samples["sump_temperature"])
+    extra = {attr: latest_sample(*samples[chan], rows) for attr, chan in _MEASURED if chan in samples}
+    return replace(run, t=rows, applied_force_n=force, slip_speed_rad_s=slip, sump_temperature_c=sump,
+                   samples=samples, **extra)
+
+
+# the measured channels put on the replay grid beside the inputs: (Run attribute, channel)
+_MEASURED = (("torque_measured_nm", "measured_torque"), ("pack_temperature_measured_c", "pack_temperature"))
 
 
 def read_bag(path, topics: TopicNames = TopicNames(), bulk: bool = True) -> Run:
