@@ -263,8 +263,8 @@ def read_bag(path, topics: TopicNames = TopicNames(), bulk: bool = True) -> Run:
         rejected_samples=rejected,
         samples=samples,
     )
-    for attr, chan, topic in (("torque_measured_nm", "measured_torque", topics.measured_torque),
-                              ("pack_temperature_measured_c", "pack_temperature", topics.pack_temperature)):
+    for attr, chan in _MEASURED:
+        topic = getattr(topics, chan)
         if topic in series:
             times, values = series[topic]
             setattr(run, attr, latest_sample(times, values, rows))
