@@ -79,6 +79,10 @@ Effects outside the catalog (``effects``: [{"name": ..., parameter: value}]):
                                      lag (a slow load cell or its filter): the log trails the
                                      pack force, so the pack force leads the log; the mirror of
                                      actuator_lag, which can only trail (a force-path effect)
+  torque_sensor_gain     gain        measured = gain × the reading (the sensor's scale off by a few
+                                     per cent): not a discrepancy of the clutch, the car
+                                     calibration takes it into the friction level (expected
+                                     diagnosis `none`)
   force_sensor_offset    offset_n    the force sensor reads the force offset_n low: the pack
                                      gets the logged force + offset_n (a zero or calibration
                                      error); read high it would be the catalog's spring_preload,
@@ -195,6 +199,10 @@ EFFECTS = {
                          "mimics": "actuator_lag", "catalog_equivalent": None,
                          "physics": "the force sensor reads the pack force through a first-order lag of "
                                     "tau_s: the log trails the pack force"},
+    "torque_sensor_gain": {"kind": "measurement", "parameters": {"gain": 0.95},
+                           "mimics": None, "catalog_equivalent": None, "calibration": True,
+                           "physics": "measured = gain x the reading: the sensor's scale off by a few per cent, "
+                                      "which the car calibration takes into the friction level"},
     "force_sensor_offset": {"kind": "force-path", "parameters": {"offset_n": 500.0},
                             "mimics": "spring_preload", "catalog_equivalent": None,
                             "physics": "the force sensor reads offset_n low: the pack gets the "
@@ -342,7 +350,8 @@ class CarLogSpec:
 
     @property
     def expected_cause(self) -> str:
-        if any(not (EFFECTS[e["name"]]["catalog_equivalent"] in CATALOG) for e in self.effects):
+        if any(not (EFFECTS[e["name"]]["catalog_equivalent"] in CATALOG or EFFECTS[e["name"]].get("calibration"))
+               for e in self.effects):
             return "unexplained"
         causes = self.expected_causes
         return causes[0] if causes else "none"
@@ -806,6 +815,9 @@ def synthesize_car_logs(spec: CarLogSpec | None = None, base_model: ClutchModel 
             transmitted[sl] = np.where(locked[sl], transmitted[sl], transmitted[sl] * (1.0 + osc))
         eff_info["judder_phases_rad"] = phases
     sensor = np.asarray(predict_measured_torque(true_model, t_abs, transmitted, run_start), float)
+    gain = spec.effect_values("torque_sensor_gain")
+    if gain is not None:
+        sensor = float(gain["gain"]) * sensor
     lp = spec.effect_values("torque_sensor_lowpass")
     if lp is not None:
         sensor = _lowpass_per_run(t_abs, sensor, run_start, lp["tau_s"])

@@ -180,6 +180,7 @@ EFFECT_RANGES = {"torque_sensor_lowpass": ("tau_s", (0.02, 0.15)),
                  "actuator_force_delay": ("delay_s", (0.015, 0.05)),
                  "actuator_force_ceiling": ("share_of_peak", (0.6, 0.8)),
                  "torque_sensor_thermal_offset": ("slope_nm_per_c", (0.3, 0.8)),
+                 "torque_sensor_gain": ("gain", (0.93, 0.97)),
                  "slip_acceleration_friction": ("gain_s2_per_rad", (0.004, 0.012))}
 
 
@@ -209,6 +210,8 @@ def _cases() -> dict:
                       "force_sensor_hysteresis", "torque_judder", "torque_sensor_resonance",
                       "force_sensor_lag", "actuator_force_delay", "actuator_force_ceiling",
                       "torque_sensor_thermal_offset")]
+    # the torque sensor's scale a few per cent off: the calibration's, nothing to name
+    out += [Case("torque_sensor_gain", "none", effects=("torque_sensor_gain",))]
     return {c.name: c for c in out}
 
 

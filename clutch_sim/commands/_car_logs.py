@@ -10,6 +10,7 @@ CHANNEL_KEYS = {"force": "applied_force", "slip": "slip_speed", "sump": "sump_te
 
 
 def add_car_logs_options(p) -> None:
+    from clutch_model.virtual_car.car_logs import EFFECTS
     g = p.add_argument_group("car-log conditions (with --conditions car-logs)")
     g.add_argument("--conditions", choices=("lab", "car-logs"), default="lab",
                    help="lab: the 200 Hz single-grid campaign (default); car-logs: topics on their "
@@ -21,13 +22,7 @@ def add_car_logs_options(p) -> None:
     g.add_argument("--car-mechanism", action="append", default=[], metavar="ID[=X]",
                    help="catalog mechanism in the true car (repeat for two at once), e.g. actuator_lag=0.1")
     g.add_argument("--effect", action="append", default=[], metavar="NAME[=X|:k=v,...]",
-                   help="effect outside the catalog: torque_sensor_lowpass, torque_ripple, "
-                        "slip_power_fade, pressure_temperature_cross, run_friction_level, "
-                        "actuator_rate_limit, actuator_second_order, actuator_backlash, "
-                        "force_sensor_offset, actuator_asymmetric_lag, actuator_force_dependent_lag, "
-                        "torque_sensor_asymmetric_lag, slip_acceleration_friction, force_sensor_hysteresis, "
-                        "torque_judder, torque_sensor_resonance, force_sensor_lag, actuator_force_delay, "
-                        "actuator_force_ceiling, torque_sensor_thermal_offset")
+                   help="effect outside the catalog (or a sensor's gain): " + ", ".join(EFFECTS))
     g.add_argument("--torque-noise-model", default=None, metavar="SPEC",
                    help="torque sensor noise class, e.g. ar1:sigma=8,phi=0.95 | lowpass:sigma=8,cutoff_hz=10 | "
                         "held:sigma=8,update_hz=10 | median:sigma=8,window=5 | drift:sigma=8,drift=10,tau_s=20 "
