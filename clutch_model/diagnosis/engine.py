@@ -45,6 +45,7 @@ from clutch_model.diagnosis.input_timing import (BETA_HELD, BETA_HELD_MAX, choos
                                                  reading_unsettled, with_held_inputs)
 from clutch_model.diagnosis.force_ceiling import named_or_force_ceiling, none_or_force_ceiling
 from clutch_model.diagnosis.sump_offset import named_or_sump_offset, none_or_sump_offset
+from clutch_model.diagnosis.wear_preload import named_or_wearing_preload
 from clutch_model.diagnosis.plain_rival import named_or_plain_rival
 from clutch_model.diagnosis.lockup import without_locked_torque
 from clutch_model.diagnosis.run_level import within_run_forecast
@@ -181,6 +182,7 @@ class Diagnosis:
     force_offset_check: dict | None = None  # the named causes against a force-sensor offset (force_dynamics.py)
     force_ceiling_check: dict | None = None  # named causes (or none) against a pack force ceiling (force_ceiling.py)
     sump_offset_check: dict | None = None  # named causes (or none) against a sump-following offset (sump_offset.py)
+    wear_preload_check: dict | None = None  # a named preload against one growing with the wear (wear_preload.py)
     plain_rival_check: dict | None = None  # named causes against a far better rival in plain squares (plain_rival.py)
     torque_line_check: dict | None = None   # nothing named: a torque oscillation following the inputs (torque_line.py)
     lag_rival_checks: dict | None = None  # a named time mechanism against lags of two constants (lag_rivals.py)
@@ -1066,6 +1068,8 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
     sel, force_ceiling = named_or_force_ceiling(data, sel, campaign, sigma_guess, ALPHA, NAMED_GAIN_FRAC, say)
     # and against a torque reading offset that follows the sump temperature (sump_offset.py)
     sel, sump_offset = named_or_sump_offset(data, sel, campaign, sigma_guess, ALPHA, NAMED_GAIN_FRAC, say)
+    # and a named preload against one growing with the lining's wear (wear_preload.py)
+    sel, wear_preload = named_or_wearing_preload(data, sel, campaign, sigma_guess, ALPHA, NAMED_GAIN_FRAC, say)
     timings["force dynamics"] = time.perf_counter() - t0
     # one cause named: a second one the car calibration absorbed beside it (bench_anchor.py)
     t0 = time.perf_counter()
@@ -1276,7 +1280,7 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
                   inputs=inputs, force_path_check=force_dynamics, force_band_check=force_band,
                   lag_rival_checks=lag_rivals,
                   force_offset_check=force_offset, force_ceiling_check=force_ceiling,
-                  sump_offset_check=sump_offset, plain_rival_check=plain_rival,
+                  sump_offset_check=sump_offset, wear_preload_check=wear_preload, plain_rival_check=plain_rival,
                   torque_line_check=torque_line,
                   bench_anchor=bench_anchor, ridged_selection=ridged.to_json() if ridged else None)
     emit("selected", diagnosis=d)

@@ -99,6 +99,7 @@ def report_dict(d: Diagnosis) -> dict:
                       "force_offset_check": d.force_offset_check,
                       "force_ceiling_check": d.force_ceiling_check,
                       "sump_offset_check": d.sump_offset_check,
+                      "wear_preload_check": d.wear_preload_check,
                       "plain_rival_check": d.plain_rival_check,
                       "torque_line_check": d.torque_line_check,
                       "bench_anchor": d.bench_anchor,
