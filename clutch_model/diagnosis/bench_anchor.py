@@ -348,8 +348,8 @@ def _far_gap_unexplained(sel, check: _Check, say, level_of=None):
     the held-out rows against 6.94 calibrated (23 times), no mechanism closing more than 77 %;
     moved by -0.0093 it is 6.81 N*m off (0.96 times) and the answer reads `none` (it read
     `unexplained`; the unseen bags 8.78 N*m off the noise-free torque, the truth's own
-    replay 9.28). The force sensor reading 4 % high above now reads `none` too: one more
-    gain on the same path. A level that leaves a gap (a friction that moves with the pack
+    replay 9.28). The force sensor reading 4 % high above meets the same rule by its figures
+    (-0.0077, 1.23 times): one more gain, on the force's path. A level that leaves a gap (a friction that moves with the pack
     temperature or the pressure) stays `unexplained` whatever its size."""
     gap_frac = check.found["gap_frac"]
     if gap_frac < BENCH_GAP_FAR:
