@@ -5,12 +5,19 @@ Kept apart from synth.py so the lab campaign's options stay as they are; synth.p
 """
 from __future__ import annotations
 
+# the virtual car's effects (car_logs.EFFECTS, whose module the help must not import: numerics)
+EFFECT_NAMES = ("torque_sensor_lowpass", "torque_sensor_thermal_offset", "torque_ripple", "slip_power_fade",
+                "slip_acceleration_friction", "pressure_temperature_cross", "run_friction_level",
+                "actuator_rate_limit", "actuator_second_order", "actuator_backlash", "torque_judder",
+                "force_sensor_hysteresis", "force_sensor_lag", "torque_sensor_gain", "force_sensor_offset",
+                "actuator_asymmetric_lag", "actuator_force_dependent_lag", "torque_sensor_asymmetric_lag",
+                "torque_sensor_resonance", "actuator_force_delay", "actuator_force_ceiling")
+
 CHANNEL_KEYS = {"force": "applied_force", "slip": "slip_speed", "sump": "sump_temperature",
                 "torque": "measured_torque", "pack": "pack_temperature"}
 
 
 def add_car_logs_options(p) -> None:
-    from clutch_model.virtual_car.car_logs import EFFECTS
     g = p.add_argument_group("car-log conditions (with --conditions car-logs)")
     g.add_argument("--conditions", choices=("lab", "car-logs"), default="lab",
                    help="lab: the 200 Hz single-grid campaign (default); car-logs: topics on their "
@@ -22,7 +29,7 @@ def add_car_logs_options(p) -> None:
     g.add_argument("--car-mechanism", action="append", default=[], metavar="ID[=X]",
                    help="catalog mechanism in the true car (repeat for two at once), e.g. actuator_lag=0.1")
     g.add_argument("--effect", action="append", default=[], metavar="NAME[=X|:k=v,...]",
-                   help="effect outside the catalog (or a sensor's gain): " + ", ".join(EFFECTS))
+                   help="effect outside the catalog (or a sensor's gain): " + ", ".join(EFFECT_NAMES))
     g.add_argument("--torque-noise-model", default=None, metavar="SPEC",
                    help="torque sensor noise class, e.g. ar1:sigma=8,phi=0.95 | lowpass:sigma=8,cutoff_hz=10 | "
                         "held:sigma=8,update_hz=10 | median:sigma=8,window=5 | drift:sigma=8,drift=10,tau_s=20 "

@@ -569,3 +569,12 @@ def test_a_drive_cut_into_bags_carries_the_plant_across_the_roll_overs():
                    drive["sump_temperature_c"], run_start=one)
     got = np.concatenate([r.fine["torque_nm"] for r in runs[:3]])
     np.testing.assert_allclose(got[~locked], ref.torque_nm[~locked], rtol=1e-9, atol=1e-6)
+
+
+def test_the_synth_help_lists_every_effect_of_the_virtual_car():
+    """`synth --effect` names the effects from a list kept beside its options (the help must not
+    import the numerics): it is the virtual car's table, no more, no less."""
+    from clutch_model.virtual_car.car_logs import EFFECTS
+    from clutch_sim.commands._car_logs import EFFECT_NAMES
+
+    assert sorted(EFFECT_NAMES) == sorted(EFFECTS)
