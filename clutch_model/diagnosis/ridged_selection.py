@@ -19,8 +19,8 @@ at it. Its answer is taken only when
   a cause the car calibration absorbed no correction to undo it with, so a selection at it can
   lose a cause the first one found (a 120 ms actuator lag on one 40 s run came back unexplained
   at x inf) -- the first selection keeps those; or it names as many, one in place of another
-  (``swaps_one_cause``: a lag or delay for another, ``swaps_a_dynamic_rival``, or a level cause
-  such as an offset for a drag); and
+  (``swaps_one_cause``: a lag or delay for another, or a level cause such as an offset for a
+  drag); and
 - its final model predicts the held-out residual better than the first one's by the measure
   the first selection's remainder was judged noise by (structure_min_gain_frac, 1 %, of the
   innovation variance and of the plain held-out mean square, at ``alpha``): what the second
@@ -41,7 +41,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from clutch_model.diagnosis.candidates import MechanismCandidate, baseline_fit
-from clutch_model.diagnosis.fitting import time_parameter_names
 from clutch_model.diagnosis.friction_ridge import ridge_label
 from clutch_model.diagnosis.selection import LOOKALIKE_ALPHA, _compare, residual
 from clutch_model.diagnosis.force_dynamics import LARGE_CUT_ALPHA, LARGE_PLAIN_CUT
@@ -72,13 +71,13 @@ def names_more(first, second) -> bool:
     return second.verdict == "named" and a < b
 
 
-def swaps_a_dynamic_rival(first, second) -> bool:
-    """Both selections name causes, as many, the same but for one: a mechanism that acts in
-    time (a lag, a delay: a parameter in seconds) named in place of another such.
+def swaps_one_cause(first, second) -> bool:
+    """Both selections name causes, as many, the same but for one: a lag or delay in place of
+    another, or a cause of the torque's level in place of another.
 
-    Why: a delay and a lag of the same time constant differ only in the shape of the torque's
-    edges, a fraction of a N*m, and the first selection's weak friction correction can
-    decide between them on what it extrapolates, not on those edges. Measured on an outside
+    A lag or delay (until stop 73 the only swap): a delay and a lag of the same time constant
+    differ only in the shape of the torque's edges, a fraction of a N*m, and the first
+    selection's weak friction correction can decide between them on what it extrapolates, not on those edges. Measured on an outside
     generator's short campaign (three bags of 8 s at 500 Hz, white noise 0.84 N*m, a 10.5 ms
     transport delay, one bag held out): at ridge x1 the held-out bag was 1.8-2.2 N*m off
     (training rows 0.87), the misfit a smoothing filter takes more of, and the plain squares
@@ -99,20 +98,10 @@ def swaps_a_dynamic_rival(first, second) -> bool:
     transport_delay@ar1#16 (the virtual car, AR(1) 0.95 noise, magnitude seed 6816) the first
     named the true delay, the second a sensor lag, better whitened at t = 3.9 (p = 0.0002,
     innovation variance -1.0 %) with a plain mean square 1.7 % lower (8.18 against 8.25 N*m):
-    a wrong name. The right swaps cut it by 62 % (c09 above) and 24 % (the pair on the car)."""
-    a, b = set(first.cause_ids), set(second.cause_ids)
-    if first.verdict != "named" or second.verdict != "named" or len(a) != len(b):
-        return False
-    gone, new = a - b, b - a
-    return len(gone) == 1 and all(time_parameter_names(i) for i in gone | new)
+    a wrong name. The right swaps cut it by 62 % (c09 above) and 24 % (the pair on the car).
 
-
-def swaps_one_cause(first, second) -> bool:
-    """Both selections name causes, as many, the same but for one: a lag or delay in place of
-    another (``swaps_a_dynamic_rival``), or a cause of the torque's level in place of another.
-
-    The weak correction also takes in a level cause as far as its terms can follow it, and the
-    first selection names what it leaves. Measured on the virtual car's torque_offset@car#7
+    A cause of the level (since stop 73): the weak correction also takes in a level cause as
+    far as its terms can follow it, and the first selection names what it leaves. Measured on the virtual car's torque_offset@car#7
     (``--quick``, magnitude seed 7007: an 18.1 N*m offset, two 20 s runs seen, AR(1) 0.9
     noise): at ridge x1 the offset fitted 17.1 N*m but was held out at t = 2.1, and a drag
     torque of 2.17 N*m per rad/s was named (t = 3.7; the unseen run 7.8 N*m off the true torque

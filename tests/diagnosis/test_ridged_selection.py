@@ -15,7 +15,7 @@ import numpy as np
 
 import pytest
 
-from clutch_model.diagnosis.ridged_selection import names_more, swaps_a_dynamic_rival, swaps_one_cause
+from clutch_model.diagnosis.ridged_selection import names_more, swaps_one_cause
 from clutch_model.formats.bag_reader import read_bags
 from clutch_model.virtual_car.hidden_campaigns import (check_campaign, make_hidden_campaign,
                                                        unseen_stamps_rmse_nm)
@@ -37,22 +37,10 @@ def test_only_a_selection_naming_more_replaces_the_first():
     assert not names_more(_sel("none"), _sel("unexplained"))
 
 
-def test_a_lag_or_delay_in_place_of_another_may_replace_the_first():
-    assert swaps_a_dynamic_rival(_sel("named", "torque_sensor_lag"), _sel("named", "transport_delay"))
-    assert swaps_a_dynamic_rival(_sel("named", "actuator_lag", "torque_offset"),
-                                 _sel("named", "transport_delay", "torque_offset"))
-    # a map-like cause swapped, a cause lost or added, the same causes, no first name: not a swap
-    assert not swaps_a_dynamic_rival(_sel("named", "spring_preload"), _sel("named", "drag_torque"))
-    assert not swaps_a_dynamic_rival(_sel("named", "actuator_lag"), _sel("named", "spring_preload"))
-    assert not swaps_a_dynamic_rival(_sel("named", "actuator_lag", "torque_offset"),
-                                     _sel("named", "transport_delay", "drag_torque"))
-    assert not swaps_a_dynamic_rival(_sel("named", "transport_delay"), _sel("named", "transport_delay"))
-    assert not swaps_a_dynamic_rival(_sel("named", "transport_delay"), _sel("unexplained"))
-    assert not swaps_a_dynamic_rival(_sel("unexplained"), _sel("named", "transport_delay"))
-
-
 def test_one_cause_in_place_of_another_may_replace_the_first():
     assert swaps_one_cause(_sel("named", "torque_sensor_lag"), _sel("named", "transport_delay"))
+    assert swaps_one_cause(_sel("named", "actuator_lag", "torque_offset"),
+                           _sel("named", "transport_delay", "torque_offset"))
     assert swaps_one_cause(_sel("named", "drag_torque"), _sel("named", "torque_offset"))
     assert swaps_one_cause(_sel("named", "spring_preload", "drag_torque"),
                            _sel("named", "spring_preload", "torque_offset"))
