@@ -282,11 +282,8 @@ def _level_leaves(check: _Check, bench_base, ctx, train, say) -> tuple:
     """The bench friction moved by one constant (``fit_friction_level``) against the calibrated
     model on the held-out rows -> (what it leaves, by the gap's measure ``_excess_frac``; the
     shift); its figures go to ``check.found["friction_level"]``."""
-    from clutch_model.diagnosis.selection import residual
-
     level = fit_friction_level(bench_base, ctx, train)
-    vs_cal = check.compare(residual(check.data, level), check.r_cal)
-    left = _excess_frac(vs_cal)
+    left, vs_cal = _level_against_calibrated(check, level)
     check.found["friction_level"] = {"shift": level.parameters["shift"], "held_out_rmse": float(vs_cal.rmse_null),
                                      "gap_left_frac": float(left)}
     say(f"  the bench friction moved by a constant ({level.parameters['shift']:+.4f} in mu): held-out RMSE "
@@ -306,17 +303,29 @@ def _the_calibrations_level(check: _Check, level, say) -> bool:
     reading 4.1 % low, one drive): a friction degradation on the bench friction closed 92 % of
     the gap (25.9 -> 10.8 N*m held out), the bench friction moved by -0.0092 came to 8.21 N*m
     against 8.16 calibrated, and the answer read `unexplained`; it reads `none`."""
+    left, vs_cal = _level_against_calibrated(check, level)
+    check.found["friction_level"]["gap_left_frac"] = float(left)
+    return _a_whole_level(check, float(level.parameters["shift"]), left, say,
+                          f" ({vs_cal.rmse_null:.2f} N*m against {vs_cal.rmse_alt:.2f} calibrated)")
+
+
+def _level_against_calibrated(check: _Check, level) -> tuple:
+    """The bench friction moved by a constant (``level``, fitted) against the calibrated model
+    on the held-out rows -> (what it leaves, by the gap's measure ``_excess_frac``; the
+    comparison, the level the null)."""
     from clutch_model.diagnosis.selection import residual
 
-    shift = float(level.parameters["shift"])
     vs_cal = check.compare(residual(check.data, level), check.r_cal)
-    left = _excess_frac(vs_cal)
-    check.found["friction_level"]["gap_left_frac"] = float(left)
+    return _excess_frac(vs_cal), vs_cal
+
+
+def _a_whole_level(check: _Check, shift: float, left: float, say, figures: str = "") -> bool:
+    """A shift of at most LEVEL_WHOLE that leaves at most BENCH_GAP_FRAC of the gap: the
+    calibration's (flagged ``a_friction_level``)."""
     if abs(shift) <= LEVEL_WHOLE and left <= BENCH_GAP_FRAC:
         check.found["a_friction_level"] = True
-        say(f"the bench friction moved by {shift:+.4f} leaves no gap ({vs_cal.rmse_null:.2f} N*m against "
-            f"{vs_cal.rmse_alt:.2f} calibrated): the car's friction level, or a sensor's gain, which the calibration "
-            f"takes")
+        say(f"the bench friction moved by {shift:+.4f} leaves no gap{figures}: the car's friction level, or a "
+            f"sensor's gain, which the calibration takes")
         return True
     return False
 
@@ -361,10 +370,7 @@ def _far_gap_unexplained(sel, check: _Check, say, level_of=None):
             say(f"the bench friction moved by {shift:+.4f} leaves no far gap: the bench fit's own reach, "
                 f"which the calibration takes")
             return sel
-        if left <= BENCH_GAP_FRAC and abs(shift) <= LEVEL_WHOLE:
-            check.found["a_friction_level"] = True
-            say(f"the bench friction moved by {shift:+.4f} leaves no gap: the car's friction level, or a sensor's "
-                f"gain, which the calibration takes")
+        if _a_whole_level(check, shift, left, say):
             return sel
     tried = check.found["mechanisms"]
     closest = max(tried, key=lambda cid: tried[cid]["gap_closed"]) if tried else None

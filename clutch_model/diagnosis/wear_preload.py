@@ -80,8 +80,8 @@ def named_or_wearing_preload(data, sel, campaign, sigma_nm: float, alpha: float,
     if footing is None:
         return sel, None
     stand_in, base, ridge = footing
-    named_preload = next((float(v) for m in sel.final.model.mechanisms if m.id == "spring_preload"
-                          for k, v in m.values.items() if k == "preload_n"), 0.0)
+    named = sel.final.model.mechanism("spring_preload")
+    named_preload = float(named.values["preload_n"]) if named is not None else 0.0
     say(f"{', '.join(sel.cause_ids)} named: checking a preload growing with the lining's wear beyond the catalog "
         f"in their place")
     fit = fit_wear_preload(base, campaign, np.asarray(data.train_mask, bool), named_preload, noise_sigma_nm=sigma_nm,
