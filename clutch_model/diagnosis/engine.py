@@ -48,6 +48,7 @@ from clutch_model.diagnosis.sump_offset import named_or_sump_offset, none_or_sum
 from clutch_model.diagnosis.wear_preload import named_or_wearing_preload
 from clutch_model.diagnosis.plain_rival import named_or_plain_rival
 from clutch_model.diagnosis.lockup import without_locked_torque
+from clutch_model.diagnosis.logger_pause import PACK_TOLERANCE_K, without_rows_after_pauses
 from clutch_model.diagnosis.run_level import within_run_forecast
 from clutch_model.diagnosis.force_dynamics import (named_or_constant_play, named_or_force_dynamics,
                                                    named_or_force_offset, named_or_sensor_dynamics,
@@ -702,6 +703,13 @@ def _diagnose_reading(nominal: ClutchModel, bench_model: ClutchModel, runs, held
     # lock-up phases (found from the data, diagnosis.lockup): the driveline sets the torque
     torque_by_run = [r.torque_measured_nm for r in campaign.runs]
     campaign, locked, lock_results = without_locked_rows(campaign, nominal.lock_slip_rad_s)
+    # a logger pause (every input silent at once): the pack temperature after it is a guess
+    campaign, paused, pauses = without_rows_after_pauses(campaign, nominal)
+    if pauses:
+        say(f"{len(pauses)} logger pause(s) of the inputs ({', '.join(f'{p.run} {p.t1_s - p.t0_s:.2f} s' for p in pauses)}): "
+            f"{int(paused.sum())} rows after them kept out of the residuals while the pack temperature may be "
+            f"off by more than {PACK_TOLERANCE_K:g} K")
+        input_info = {**input_info, "logger_pauses": [p.as_dict() for p in pauses]}
     entry_rows = lock_entry_rows(campaign, lock_results)      # while the runs keep their slip samples
     # each topic's raw samples served the regridding and the lock-up detection; nothing after
     # reads them (an hour at 1 kHz: ~0.5 GB)
