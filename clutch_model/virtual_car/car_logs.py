@@ -30,6 +30,8 @@ Drive (per run, segments back to back until the run's end; ``schedule``):
   request forces are capped by ``power_limit_w`` / (0.2·N_f·r_m·|slip|).
 Schedules: ``short-runs`` (10 runs × 10 s), ``few-long`` (3 runs × 60 s), ``long-drive``
 (one bag of 240 s); ``n_runs`` / ``run_duration_s`` override.
+``logger_pause_runs``: the first N runs each lose every topic for U(``logger_pause_s``) while
+the clutch runs on (a recorder's stall).
 
 Effects outside the catalog (``effects``: [{"name": ..., parameter: value}]):
   torque_sensor_lowpass  tau_s       measured = first-order low-pass of the transmitted torque
@@ -270,6 +272,10 @@ class CarLogSpec:
     # no pause between them, the plant (pack temperature, film, mechanism states) and the sump
     # carry across their boundaries; later runs follow after pauses as usual (0: none)
     continuous_runs: int = 0
+    # the first this many runs each have one logger pause: every topic silent for
+    # U(logger_pause_s) from U(0.3, 0.6) of the run while the clutch runs on (0: none)
+    logger_pause_runs: int = 0
+    logger_pause_s: tuple = (1.0, 3.0)
     start_time_ns: int = DEFAULT_START_TIME_NS
     clocks: dict = field(default_factory=dict)      # channel -> TopicClock (defaults above)
     noise: dict = field(default_factory=dict)       # channel -> Noise (defaults above)
@@ -852,6 +858,12 @@ def synthesize_car_logs(spec: CarLogSpec | None = None, base_model: ClutchModel 
         clean_fine = {ch: values[sl] for ch, values in whole.items()}
         chans = [c for c in CHANNELS if c != "pack_temperature" or spec.include_pack_temperature]
         series, truth = {}, {}
+        pause = None
+        if i < spec.logger_pause_runs:       # its own generator: every other draw stays as it was
+            rng_pause = np.random.default_rng([int(spec.seed), 7310, i])
+            p0 = float(rng_pause.uniform(0.3, 0.6)) * dur
+            pause = (p0, p0 + float(rng_pause.uniform(*spec.logger_pause_s)))
+            schedules[i] = {**schedules[i], "logger_pause_s": [round(pause[0], 4), round(pause[1], 4)]}
         for ch in chans:
             clock = spec.clocks[ch]
             if spec.random_phase:
@@ -864,6 +876,9 @@ def synthesize_car_logs(spec: CarLogSpec | None = None, base_model: ClutchModel 
             logged = clean + noise if step <= 0 else np.round((clean + noise) / step) * step
             if ch in rails:
                 logged = np.clip(logged, -rails[ch], rails[ch])
+            if pause is not None:                # the logger silent, the clutch running on
+                kept = (t_stamp < pause[0]) | (t_stamp > pause[1])
+                t_true, t_stamp, clean, noise, logged = (a[kept] for a in (t_true, t_stamp, clean, noise, logged))
             series[ch] = TopicSeries(t_stamp, logged, var)
             truth[ch] = {"t_true_s": t_true, "t_stamp_s": t_stamp, "clean": clean, "noise": noise,
                          "phase_s": clock.phase_s}

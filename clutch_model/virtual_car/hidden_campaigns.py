@@ -63,7 +63,7 @@ class Condition:
     10 Hz, topics unaligned), "gateway" (the car's, the torque at 125 Hz stamped on arrival,
     ``GATEWAY_TORQUE_CLOCK``) or "bursts" (the car's, force and torque forwarded in bursts,
     ``BURST_CLOCKS``). ``torque_noise``: (kind, options) of the torque sensor's noise,
-    σ = 8 N·m. ``size`` / ``quick_size``: (runs diagnose sees, later runs it never sees,
+    σ = ``torque_noise_sigma`` (8 N·m). ``size`` / ``quick_size``: (runs diagnose sees, later runs it never sees,
     run duration s)."""
 
     name: str
@@ -71,6 +71,7 @@ class Condition:
     klass: str
     clocks: str = "lab"
     torque_noise: tuple = ("white", {})
+    torque_noise_sigma: float = 8.0
     slip_noise: tuple | None = None
     slip_noise_sigma: float = 0.05
     resolution: dict | None = None      # channel -> the step its value is logged in
@@ -82,17 +83,19 @@ class Condition:
     quick_size: tuple = (4, 2, 8.0)
     continuous_drive: bool = False      # the runs diagnose sees are one drive cut into consecutive bags
     #                                     (car_logs.CarLogSpec.continuous_runs); the unseen runs follow after pauses
+    logger_pause: bool = False          # each run diagnose sees has a logger pause (car_logs.CarLogSpec.logger_pause_runs)
 
     def spec_kwargs(self, quick: bool = False) -> dict:
         seen, unseen, dur = self.quick_size if quick else self.size
         kind, opts = self.torque_noise
-        noise = {"measured_torque": make_noise(kind, 8.0, **opts)}
+        noise = {"measured_torque": make_noise(kind, self.torque_noise_sigma, **opts)}
         if self.slip_noise is not None:
             noise["slip_speed"] = make_noise(self.slip_noise[0], self.slip_noise_sigma, **self.slip_noise[1])
         kw = {"schedule": self.schedule, "n_runs": seen + unseen, "run_duration_s": dur,
               "noise": noise, "lockup": self.lockup, "slip_sign_changes": self.slip_sign_changes,
               "resolution": dict(self.resolution or {}), "sensor_range": dict(self.sensor_range or {}),
-              "continuous_runs": seen if self.continuous_drive else 0}
+              "continuous_runs": seen if self.continuous_drive else 0,
+              "logger_pause_runs": seen if self.logger_pause else 0}
         if self.clocks == "lab":
             kw.update(clocks=dict(LAB_CLOCKS), random_phase=False)
         elif self.clocks == "gateway":
@@ -151,6 +154,10 @@ CONDITIONS = {c.name: c for c in (
                           "their own clocks, lock-up",
               "rollover", clocks="car", lockup=True, schedule="few-long", size=(4, 1, 30.0),
               quick_size=(3, 1, 20.0), continuous_drive=True),
+    Condition("pause", "a logger pause of 1-3 s in every bag diagnose sees (every topic silent while the clutch "
+                       "runs on; the unseen bags without one), topics on their own clocks, lock-up, a quiet torque sensor "
+                       "(white, 1.5 N·m)", "pause",
+              clocks="car", lockup=True, torque_noise_sigma=1.5, size=(4, 2, 20.0), quick_size=(3, 2, 15.0), logger_pause=True),
     Condition("car", "everything at once: unaligned topics, AR(1) φ 0.9 torque and slip noise, "
                      "lock-up, few long runs", "car", clocks="car",
               torque_noise=("ar1", {"phi": 0.9}), slip_noise=("ar1", {"phi": 0.9}), lockup=True,
