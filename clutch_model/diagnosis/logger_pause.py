@@ -135,8 +135,6 @@ def pauses_of_run(run, model) -> list:
             decay = np.exp(-np.cumsum(rate[k] * dt))
             over = np.flatnonzero(bound0 * decay > PACK_TOLERANCE_K)
             end = float(t[k[over[-1]]]) if over.size else t1
-            if over.size and over[-1] == k.size - 1:
-                end = float(t[-1])
         out.append(LoggerPause(run.name, float(t0), float(t1), float(bound0), end))
     return out
 
