@@ -119,23 +119,26 @@ def _near_power_w(run, t0: float, t1: float) -> float:
 
 def pauses_of_run(run, model) -> list:
     """The run's logger pauses, each with the rows its pack temperature bound leaves out."""
+    spans = input_pauses(run)
+    if not spans:
+        return []
     p = model.vector()
     area, capacity, plates = model.nominal_area_m2, p[L.PLATE_HEAT_CAPACITY], max(p[L.N_SEPARATOR], 1.0)
     t = np.asarray(run.t, float)
     w_abs = np.abs(np.asarray(run.slip_speed_rad_s, float))
     rate = area * _heat_transfer(p, w_abs, run.applied_force_n) / capacity      # 1/s
+    had = np.isfinite(run.torque_measured_nm) if run.torque_measured_nm is not None else np.zeros(t.size, bool)
     out = []
-    for t0, t1 in input_pauses(run):
+    for t0, t1 in spans:
         bound0 = _near_power_w(run, t0, t1) * (t1 - t0) / (plates * capacity)
-        after = np.flatnonzero(t >= t1)
+        k = np.flatnonzero(t >= t1)
         end = t1
-        if after.size and bound0 > PACK_TOLERANCE_K:
-            k = after
-            dt = np.diff(t[k], prepend=t1)
-            decay = np.exp(-np.cumsum(rate[k] * dt))
+        if k.size and bound0 > PACK_TOLERANCE_K:
+            decay = np.exp(-np.cumsum(rate[k] * np.diff(t[k], prepend=t1)))
             over = np.flatnonzero(bound0 * decay > PACK_TOLERANCE_K)
             end = float(t[k[over[-1]]]) if over.size else t1
-        out.append(LoggerPause(run.name, float(t0), float(t1), float(bound0), end))
+        rows = int(np.sum((t > t0) & (t <= end) & had))
+        out.append(LoggerPause(run.name, float(t0), float(t1), float(bound0), end, rows))
     return out
 
 
@@ -149,13 +152,10 @@ def without_rows_after_pauses(campaign, model) -> tuple:
         found = pauses_of_run(run, model) if run.torque_measured_nm is not None else []
         out = np.zeros(run.t.size, bool)
         for pause in found:
-            rows = (run.t > pause.t0_s) & (run.t <= pause.left_out_to_s)
-            pause.rows_left_out = int(np.sum(rows & np.isfinite(run.torque_measured_nm)))
-            out |= rows
+            out |= (run.t > pause.t0_s) & (run.t <= pause.left_out_to_s)
         if out.any():
-            had = np.isfinite(run.torque_measured_nm)
+            out &= np.isfinite(run.torque_measured_nm)
             run = replace(run, torque_measured_nm=np.where(out, np.nan, run.torque_measured_nm))
-            out &= had
         runs.append(run)
         masks.append(out)
         pauses.extend(found)
