@@ -703,10 +703,13 @@ def _diagnose_reading(nominal: ClutchModel, bench_model: ClutchModel, runs, held
     # lock-up phases (found from the data, diagnosis.lockup): the driveline sets the torque
     torque_by_run = [r.torque_measured_nm for r in campaign.runs]
     campaign, locked, lock_results = without_locked_rows(campaign, nominal.lock_slip_rad_s)
-    # a logger pause (every input silent at once): the pack temperature after it is a guess
-    campaign, paused, pauses = without_rows_after_pauses(campaign, nominal)
+    # a logger pause (every input silent at once): the pack's heat in it estimated from the rows
+    # after it, those rows left out while that estimate leaves the pack temperature uncertain
+    campaign, paused, pauses = without_rows_after_pauses(campaign, bench_model)
     if pauses:
-        say(f"{len(pauses)} logger pause(s) of the inputs ({', '.join(f'{p.run} {p.t1_s - p.t0_s:.2f} s' for p in pauses)}): "
+        heats = [f"{p.run} {p.t1_s - p.t0_s:.2f} s" + (f" (heat {p.heat.heat_j / 1e3:.1f} kJ)" if p.heat else "")
+                 for p in pauses]
+        say(f"{len(pauses)} logger pause(s) of the inputs ({', '.join(heats)}): "
             f"{int(paused.sum())} rows after them kept out of the residuals while the pack temperature may be "
             f"off by more than {PACK_TOLERANCE_K:g} K")
         input_info = {**input_info, "logger_pauses": [p.as_dict() for p in pauses]}
