@@ -24,19 +24,17 @@ row's slip and force. The plant still runs over those rows: the state is carried
 
 That bound is the worst case: the largest power near the pause kept up through all of it.
 Where the rows after the pause say more, the pause's heat is estimated from them
-(``fit_pause_heat``): the plant is driven through the pause at the force and the slip it had
-near its edges, the slip scaled by ``heat_scale`` in [0, 1] (0: no heat, 1: the worst case),
-and the scale that makes the model follow the rows after the pause is kept in the campaign.
-The model's torque is compared there after a least-squares level fitted on the run's rows
-away from every pause (a friction level the model gets wrong is not taken for heat). The
-pause is then kept out of the residuals only while the pack temperature spanned by the
-scale's 95 % interval (a likelihood-ratio interval, its residual variance inflated for their
-lag-1 autocorrelation) differs by more than ``PACK_TOLERANCE_K``: a pause the rows pin down
-leaves nothing out, one they do not leaves out what the worst case does. Measured on an
-outside generator's campaign (a 33 ms transport delay, pauses of 1.4-4 s in five of seven
-bags, a cold day and a hot one): the worst case left out every row after the pause in two of
-the three cold fit runs, the calibration then never saw the cold runs' heavy engagements, and
-its held-out rows came out 12.8 times the fitted rows' mean square: `unexplained`.
+(``fit_pause_heat``): the plant is driven through the pause at the force as read across it
+and the largest slip near its edges scaled by ``heat_scale`` in [0, 1] (0: no heat), and the
+scale that makes the model follow the rows after the pause is kept in the campaign. The model
+is compared there on the rows where the force has been steady for 0.5 s and the clutch slips
+(``continued_bags.steady_force``: a lag or a delay the model lacks has settled there, the pack
+temperature's slow pull on the level has not), after a least-squares torque level fitted on the
+run's such rows away from every pause (a friction level the model gets wrong is not taken for
+heat). The pause is then kept out of the residuals only while the pack temperatures spanned by
+the scale's 95 % interval (likelihood ratio, the residual variance inflated for its lag-1
+autocorrelation) differ by more than ``PACK_TOLERANCE_K``: a pause the rows pin down leaves
+nothing out, one they do not leaves out what the worst case does.
 
 A pause is a span in which neither the force nor the slip has a sample for longer than
 ``PAUSE_MIN_S`` and ``PAUSE_PERIODS`` of the topic's own median interval (a force logged on
@@ -57,7 +55,12 @@ PACK_TOLERANCE_K = 1.0      # rows left out while the pack temperature may be of
 POWER_WINDOW_S = 1.0        # the slip power near a pause: its largest within this of either edge
 INPUT_TOPICS = ("applied_force", "slip_speed")
 HEAT_SCALES = np.linspace(0.0, 1.0, 11)   # the pause's slip over its edges' largest, tried (then refined)
-MIN_WINDOW_ROWS = 30        # torque rows after a pause needed to estimate its heat
+MIN_WINDOW_ROWS = 30        # steady slipping torque rows after a pause needed to estimate its heat
+FIT_WINDOW_S = 60.0         # ... within this of its end (about the pack's thermal time constant)
+LEAD_S = 120.0              # the plant simulated from this long before a pause (restarted there) ...
+SLICE_AFTER_S = 300.0       # ... to this long after it, for its heat and its family
+FILM_MEMORY_S = 0.5         # the pause's last instants whose force the film leaves it with
+TORQUE_TOLERANCE_NM = 1.0   # rows left out while the pause family's torques differ by more
 MIN_LEVEL_ROWS = 50         # rows away from every pause needed for the run's torque level
 CHI2_95 = 3.841             # chi-square(1) 95 % point: the heat scale's likelihood-ratio interval
 
@@ -74,11 +77,14 @@ class LoggerPause:
     left_out_to_s: float
     rows_left_out: int = 0
     heat: "PauseHeat | None" = None
+    torque_spread_nm: float | None = None   # the largest spread of the pause family's torques after it
 
     def as_dict(self) -> dict:
         out = {"bag": self.run, "t0_s": round(self.t0_s, 4), "t1_s": round(self.t1_s, 4),
                "pack_bound_k": round(self.pack_bound_k, 2), "left_out_to_s": round(self.left_out_to_s, 3),
                "rows_left_out": int(self.rows_left_out)}
+        if self.torque_spread_nm is not None:
+            out["torque_spread_nm"] = round(self.torque_spread_nm, 2)
         if self.heat is not None:
             out["heat"] = self.heat.as_dict()
         return out
@@ -87,16 +93,16 @@ class LoggerPause:
 @dataclass
 class PauseHeat:
     """The heat a pause's rows after it say the pack took in: the plant driven through the pause
-    at ``force_n`` and ``heat_scale`` x ``slip_rad_s`` (the largest force and slip within
-    POWER_WINDOW_S of its edges), the scale's 95 % interval, the heat (J) that scale gives, and
+    at ``heat_scale`` x ``slip_rad_s`` (the largest slip within POWER_WINDOW_S of its edges) and
+    the force as read across it, the scale's 95 % interval, the heat (J) that scale gives, and
     the pack temperatures just after the pause at the interval's ends and at the estimate.
+    ``window_rows``: the steady slipping rows after the pause it was fitted on.
     ``worst_case_bound_k``: the bound without the estimate."""
     heat_scale: float
     heat_scale_ci95: tuple
     heat_j: float
     pack_after_c: tuple          # (at the interval's low end, at the estimate, at its high end)
     worst_case_bound_k: float
-    force_n: float
     slip_rad_s: float
     window_rows: int
     level: float                 # the model's torque level fitted on the run's rows away from pauses
@@ -105,7 +111,7 @@ class PauseHeat:
         return {"heat_scale": round(self.heat_scale, 3),
                 "heat_scale_ci95": [round(x, 3) for x in self.heat_scale_ci95],
                 "heat_j": round(self.heat_j, 1), "pack_after_c": [round(x, 2) for x in self.pack_after_c],
-                "worst_case_bound_k": round(self.worst_case_bound_k, 2), "force_n": round(self.force_n, 1),
+                "worst_case_bound_k": round(self.worst_case_bound_k, 2),
                 "slip_rad_s": round(self.slip_rad_s, 3), "window_rows": int(self.window_rows),
                 "torque_level": round(self.level, 4)}
 
@@ -210,31 +216,28 @@ def pauses_of_run(run, model) -> list:
     return out
 
 
-def _edge_inputs(run, t0: float, t1: float) -> tuple:
-    """(force N, signed slip rad/s): the largest force and slip of the rows within
-    POWER_WINDOW_S of the pause's edges, the slip's sign the last one before the pause."""
+def _edge_slip(run, t0: float, t1: float) -> float:
+    """The largest slip (rad/s) of the rows within POWER_WINDOW_S of the pause's edges, signed
+    as the last one before the pause."""
     t = np.asarray(run.t, float)
     near = ((t >= t0 - POWER_WINDOW_S) & (t <= t0)) | ((t >= t1) & (t <= t1 + POWER_WINDOW_S))
     if not near.any():
-        return 0.0, 0.0
-    force = float(np.max(np.asarray(run.applied_force_n, float)[near]))
+        return 0.0
     slip = np.asarray(run.slip_speed_rad_s, float)
     before = slip[(t <= t0) & (slip != 0.0)]
     sign = float(np.sign(before[-1])) if before.size else 1.0
-    return force, sign * float(np.max(np.abs(slip[near])))
+    return sign * float(np.max(np.abs(slip[near])))
 
 
-def _with_pause_inputs(run, t0: float, t1: float, force_n: float, slip_rad_s: float):
+def _with_pause_slip(run, t0: float, t1: float, slip_rad_s: float):
     """The run with the plant driven through the pause (its rows strictly inside (t0, t1), on
-    the rows and on a finer plant grid) at ``force_n`` and ``slip_rad_s``."""
+    the rows and on a finer plant grid) at ``slip_rad_s``; the force as read across the pause."""
     inside = (run.t > t0) & (run.t < t1)
-    out = replace(run, applied_force_n=np.where(inside, force_n, run.applied_force_n),
-                  slip_speed_rad_s=np.where(inside, slip_rad_s, run.slip_speed_rad_s))
+    out = replace(run, slip_speed_rad_s=np.where(inside, slip_rad_s, run.slip_speed_rad_s))
     g = run.plant_grid
     if g is not None:
         on = (g.t > t0) & (g.t < t1)
-        out = replace(out, plant_grid=replace(g, force=np.where(on, force_n, g.force),
-                                              slip=np.where(on, slip_rad_s, g.slip)))
+        out = replace(out, plant_grid=replace(g, slip=np.where(on, slip_rad_s, g.slip)))
     return out
 
 
@@ -254,81 +257,131 @@ def _interval(q: np.ndarray, sse: np.ndarray, threshold: float) -> tuple:
     return float(lo), float(hi)
 
 
-def fit_pause_heat(run, pauses: list, model) -> tuple:
+def _slice(run, a: int, b: int):
+    """Rows a..b-1 of the run (its plant grid's window with them): the plant restarts at row a."""
+    if a == 0 and b >= run.t.size:
+        return run
+    cut = {f: getattr(run, f)[a:b] for f in ("t", "applied_force_n", "slip_speed_rad_s", "sump_temperature_c",
+                                            "torque_measured_nm", "pack_temperature_measured_c")
+           if getattr(run, f) is not None}
+    grid = run.plant_grid.window(a, b) if run.plant_grid is not None else None
+    return replace(run, plant_grid=grid, **cut)
+
+
+def _with_pause_force_end(run, t0: float, t1: float, force_n: float):
+    """The run with the force over the pause's last FILM_MEMORY_S at ``force_n``: the film the
+    plant leaves the pause with is what those last instants pressed it to."""
+    a = max(t0, t1 - FILM_MEMORY_S)
+    inside = (run.t > a) & (run.t < t1)
+    out = replace(run, applied_force_n=np.where(inside, force_n, run.applied_force_n))
+    g = run.plant_grid
+    if g is not None:
+        on = (g.t > a) & (g.t < t1)
+        out = replace(out, plant_grid=replace(g, force=np.where(on, force_n, g.force)))
+    return out
+
+
+def fit_pause_heat(run, pauses: list, model, tolerance_nm: float = TORQUE_TOLERANCE_NM) -> tuple:
     """-> (run, pauses): each pause's heat estimated from the torque rows after it (module
-    doc), the run driven through each pause at its estimate, each pause's rows left out only
-    while the pack temperature its interval spans differs by more than PACK_TOLERANCE_K. A
-    pause with too few rows after it, or a worst case within the tolerance, is left as it is."""
+    doc), the run driven through each pause at its estimate, and each pause's rows left out
+    while the torques predicted over what the pause may have been (``_pause_family``) differ by
+    more than ``tolerance_nm``. Without rows to estimate the heat from, the pause's inputs stay
+    as read and the family spans every heat scale."""
     from scipy.optimize import minimize_scalar
 
+    from clutch_model.diagnosis.continued_bags import SLIPPING_RAD_S, steady_force
     from clutch_model.formats.bag_reader import Campaign
     from clutch_model.prediction import predict_campaign
 
     if not pauses or run.torque_measured_nm is None:
         return run, pauses
-    t = np.asarray(run.t, float)
-    measured = np.asarray(run.torque_measured_nm, float)
-    had = np.isfinite(measured)
-    away = had.copy()
-    for pause in pauses:
-        away &= ~((t > pause.t0_s) & (t <= pause.left_out_to_s))
-    rate = _decay_rate(run, model)
-    out = []
     pauses = sorted(pauses, key=lambda p: p.t0_s)
+    out = []
     for n, pause in enumerate(pauses):
+        t = np.asarray(run.t, float)
+        measured = np.asarray(run.torque_measured_nm, float)
+        had = np.isfinite(measured)
         t0, t1 = pause.t0_s, pause.t1_s
         next_t0 = pauses[n + 1].t0_s if n + 1 < len(pauses) else np.inf
-        window = had & (t >= t1) & (t <= pause.left_out_to_s) & (t < next_t0)
-        if pause.pack_bound_k <= PACK_TOLERANCE_K or window.sum() < MIN_WINDOW_ROWS:
-            out.append(pause)
-            continue
-        force, slip = _edge_inputs(run, t0, t1)
-        first_after = int(np.searchsorted(t, t1))
-        inside = (t > t0) & (t < t1)
-        dt = np.diff(t, prepend=t[0])
+        a = int(np.searchsorted(t, t0 - LEAD_S))
+        b = int(np.searchsorted(t, min(t1 + SLICE_AFTER_S, next_t0), side="right"))
+        part = _slice(run, a, b)
+        tp, mp, hp = t[a:b], measured[a:b], had[a:b]
+        # compared where the force has been steady and the clutch slips: a force path's dynamics
+        # or a delay the model lacks settle there; the pack temperature's slow pull stays
+        compared = hp & steady_force(tp, part.applied_force_n) & (np.abs(part.slip_speed_rad_s) > SLIPPING_RAD_S)
+        window = compared & (tp >= t1) & (tp <= t1 + FIT_WINDOW_S)
+        away = compared & ((tp <= t0 - POWER_WINDOW_S) | (tp > t1 + FIT_WINDOW_S))
+        slip = _edge_slip(part, t0, t1)
+        inside = (tp > t0) & (tp < t1)
+        first_after = min(int(np.searchsorted(tp, t1)), tp.size - 1)
+        dt = np.diff(tp, prepend=tp[0])
         tried = {}
+
+        def simulate(q: float, force_end=None):
+            trial = _with_pause_slip(part, t0, t1, q * slip)
+            if force_end is not None:
+                trial = _with_pause_force_end(trial, t0, t1, force_end)
+            return predict_campaign(model, Campaign([trial]))
 
         def evaluate(q: float):
             q = float(q)
             if q not in tried:
-                trial = _with_pause_inputs(run, t0, t1, force, q * slip)
-                pred = predict_campaign(model, Campaign([trial]))
+                pred = simulate(q)
                 y = np.asarray(pred.torque_nm, float)
                 level = 1.0
                 if away.sum() >= MIN_LEVEL_ROWS:
                     ya = y[away]
-                    level = float(ya @ measured[away] / (ya @ ya)) if ya @ ya > 0.0 else 1.0
-                r = measured[window] - level * y[window]
+                    level = float(ya @ mp[away] / (ya @ ya)) if ya @ ya > 0.0 else 1.0
+                r = mp[window] - level * y[window]
                 heat = float(np.sum(np.abs(np.asarray(pred.plant_torque_nm)[inside] * q * slip) * dt[inside]))
-                tried[q] = (float(r @ r), float(pred.pack_temperature_c[min(first_after, t.size - 1)]),
-                            level, r, heat, trial)
+                tried[q] = (float(r @ r), float(pred.pack_temperature_c[first_after]), level, r, heat)
             return tried[q][0]
 
-        sse = np.array([evaluate(q) for q in HEAT_SCALES])
-        i = int(np.argmin(sse))
-        lo_b, hi_b = HEAT_SCALES[max(i - 1, 0)], HEAT_SCALES[min(i + 1, HEAT_SCALES.size - 1)]
-        best = minimize_scalar(evaluate, bounds=(lo_b, hi_b), method="bounded", options={"xatol": 0.005})
-        q_hat = min(tried, key=lambda q: tried[q][0])
-        sse_min, pack_hat, level, r, heat, trial = tried[q_hat]
-        m = r.size
-        rho = float(np.clip(r[1:] @ r[:-1] / (r @ r), 0.0, 0.98)) if m > 2 and r @ r > 0 else 0.0
-        threshold = sse_min * (1.0 + CHI2_95 / (m - 1) * (1.0 + rho) / (1.0 - rho))
-        qs = np.array(sorted(tried))
-        lo, hi = _interval(qs, np.array([tried[q][0] for q in qs]), threshold)
-        packs = np.array([tried[q][1] for q in qs])
-        pack_lo, pack_hi = float(np.interp(lo, qs, packs)), float(np.interp(hi, qs, packs))
-        bound0 = max(abs(pack_lo - pack_hat), abs(pack_hi - pack_hat))
-        end = _decay_end(t, rate, t1, bound0)
+        heat_info = None
+        if window.sum() >= MIN_WINDOW_ROWS and slip != 0.0:
+            sse = np.array([evaluate(q) for q in HEAT_SCALES])
+            i = int(np.argmin(sse))
+            minimize_scalar(evaluate, bounds=(HEAT_SCALES[max(i - 1, 0)], HEAT_SCALES[min(i + 1, HEAT_SCALES.size - 1)]),
+                            method="bounded", options={"xatol": 0.005})
+            q_hat = min(tried, key=lambda q: tried[q][0])
+            sse_min, pack_hat, level, r, heat = tried[q_hat]
+            m = r.size
+            rho = float(np.clip(r[1:] @ r[:-1] / (r @ r), 0.0, 0.98)) if m > 2 and r @ r > 0 else 0.0
+            threshold = sse_min * (1.0 + CHI2_95 / (m - 1) * (1.0 + rho) / (1.0 - rho))
+            qs = np.array(sorted(tried))
+            lo, hi = _interval(qs, np.array([tried[q][0] for q in qs]), threshold)
+            packs = np.array([tried[q][1] for q in qs])
+            pack_lo, pack_hi = float(np.interp(lo, qs, packs)), float(np.interp(hi, qs, packs))
+            heat_info = PauseHeat(q_hat, (lo, hi), heat, (pack_lo, pack_hat, pack_hi), pause.pack_bound_k,
+                                  slip, int(window.sum()), level)
+            scales, base = sorted({lo, q_hat, hi}), simulate(q_hat)
+        else:
+            scales, base = list(HEAT_SCALES[::5]), predict_campaign(model, Campaign([part]))
+        # what the pause may have been: the heat scales its interval allows, and the force of its
+        # last instants at the least and the most the edges had
+        tn = np.asarray(part.t, float)
+        near = ((tn >= t0 - POWER_WINDOW_S) & (tn <= t0)) | ((tn >= t1) & (tn <= t1 + POWER_WINDOW_S))
+        forces = (None,) if not near.any() else (None, float(part.applied_force_n[near].min()),
+                                                 float(part.applied_force_n[near].max()))
+        family = [base] + [simulate(q, f) for q in scales for f in forces] if slip != 0.0 else \
+            [base] + [simulate(0.0, f) for f in forces[1:]]
+        torques = np.array([np.asarray(p.torque_nm, float) for p in family])
+        packs_after = [float(p.pack_temperature_c[first_after]) for p in family]
+        after = hp & (tp >= t1)
+        spread = np.ptp(torques[:, after], axis=0) if after.any() else np.zeros(0)
+        over = np.flatnonzero(spread > tolerance_nm)
+        end = float(tp[after][over[-1]]) if over.size else t1
         rows = int(np.sum((t > t0) & (t <= end) & had))
-        del best
-        heat_info = PauseHeat(q_hat, (lo, hi), heat, (pack_lo, pack_hat, pack_hi), pause.pack_bound_k,
-                              force, slip, int(window.sum()), level)
-        out.append(LoggerPause(pause.run, t0, t1, float(bound0), end, rows, heat_info))
-        run = trial
+        if heat_info is not None:
+            run = _with_pause_slip(run, t0, t1, heat_info.heat_scale * slip)
+        out.append(LoggerPause(pause.run, t0, t1, float(np.ptp(packs_after)), end, rows, heat_info,
+                               float(spread.max()) if spread.size else 0.0))
     return run, out
 
 
-def without_rows_after_pauses(campaign, model, fit_heat: bool = True) -> tuple:
+def without_rows_after_pauses(campaign, model, fit_heat: bool = True,
+                              tolerance_nm: float = TORQUE_TOLERANCE_NM) -> tuple:
     """(campaign with the measured torque NaN from each logger pause to ``left_out_to_s``,
     mask of the rows left out that had a torque, [LoggerPause]). ``fit_heat``: each pause's
     heat estimated from the rows after it by ``model`` (``fit_pause_heat``) and the plant driven
@@ -339,7 +392,7 @@ def without_rows_after_pauses(campaign, model, fit_heat: bool = True) -> tuple:
     for run in campaign.runs:
         found = pauses_of_run(run, model) if run.torque_measured_nm is not None else []
         if fit_heat and found:
-            run, found = fit_pause_heat(run, found, model)
+            run, found = fit_pause_heat(run, found, model, tolerance_nm)
         out = np.zeros(run.t.size, bool)
         for pause in found:
             out |= (run.t > pause.t0_s) & (run.t <= pause.left_out_to_s)
