@@ -60,7 +60,8 @@ FIT_WINDOW_S = 60.0         # ... within this of its end (about the pack's therm
 LEAD_S = 120.0              # the plant simulated from this long before a pause (restarted there) ...
 SLICE_AFTER_S = 300.0       # ... to this long after it, for its heat and its family
 FILM_MEMORY_S = 0.5         # the pause's last instants whose force the film leaves it with
-TORQUE_TOLERANCE_NM = 1.0   # rows left out while the pause family's torques differ by more
+TORQUE_TOLERANCE_NM = 1.0   # rows left out while the pause family's torques differ by more ...
+FILM_TOLERANCE = 0.01       # ... or its films (relative)
 MIN_LEVEL_ROWS = 50         # rows away from every pause needed for the run's torque level
 CHI2_95 = 3.841             # chi-square(1) 95 % point: the heat scale's likelihood-ratio interval
 
@@ -358,20 +359,30 @@ def fit_pause_heat(run, pauses: list, model, tolerance_nm: float = TORQUE_TOLERA
             scales, base = sorted({lo, q_hat, hi}), simulate(q_hat)
         else:
             scales, base = list(HEAT_SCALES[::5]), predict_campaign(model, Campaign([part]))
-        # what the pause may have been: the heat scales its interval allows, and the force of its
-        # last instants at the least and the most the edges had
-        tn = np.asarray(part.t, float)
-        near = ((tn >= t0 - POWER_WINDOW_S) & (tn <= t0)) | ((tn >= t1) & (tn <= t1 + POWER_WINDOW_S))
-        forces = (None,) if not near.any() else (None, float(part.applied_force_n[near].min()),
-                                                 float(part.applied_force_n[near].max()))
-        family = [base] + [simulate(q, f) for q in scales for f in forces] if slip != 0.0 else \
-            [base] + [simulate(0.0, f) for f in forces[1:]]
-        torques = np.array([np.asarray(p.torque_nm, float) for p in family])
-        packs_after = [float(p.pack_temperature_c[first_after]) for p in family]
+        # what the pause may have been: the heat scales its interval allows (their torques must
+        # agree within the tolerance), and the force of its last instants at the least and the most
+        # the edges had (their films must agree within FILM_TOLERANCE: the force's extra heat there
+        # is the heat scales' to span)
+        heat_family = [base] + ([simulate(q) for q in scales] if slip != 0.0 else [])
+        torques = np.array([np.asarray(p.torque_nm, float) for p in heat_family])
+        packs_after = [float(p.pack_temperature_c[first_after]) for p in heat_family]
         after = hp & (tp >= t1)
         spread = np.ptp(torques[:, after], axis=0) if after.any() else np.zeros(0)
         over = np.flatnonzero(spread > tolerance_nm)
         end = float(tp[after][over[-1]]) if over.size else t1
+        tn = np.asarray(part.t, float)
+        near = ((tn >= t0 - POWER_WINDOW_S) & (tn <= t0)) | ((tn >= t1) & (tn <= t1 + POWER_WINDOW_S))
+        if near.any():
+            q_base = heat_info.heat_scale if heat_info is not None else None
+            films = []
+            for f in (float(part.applied_force_n[near].min()), float(part.applied_force_n[near].max())):
+                trial = _with_pause_force_end(part if q_base is None else _with_pause_slip(part, t0, t1, q_base * slip),
+                                              t0, t1, f)
+                films.append(np.asarray(predict_campaign(model, Campaign([trial])).sim.film_thickness_m, float))
+            h_lo, h_hi = np.minimum(films[0], films[1]), np.maximum(films[0], films[1])
+            apart = np.flatnonzero((tp >= t1) & (h_hi - h_lo > FILM_TOLERANCE * np.maximum(h_lo, 1e-12)))
+            if apart.size:
+                end = max(end, float(tp[apart[-1]]))
         rows = int(np.sum((t > t0) & (t <= end) & had))
         if heat_info is not None:
             run = _with_pause_slip(run, t0, t1, heat_info.heat_scale * slip)
