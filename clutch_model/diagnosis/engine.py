@@ -48,7 +48,7 @@ from clutch_model.diagnosis.sump_offset import named_or_sump_offset, none_or_sum
 from clutch_model.diagnosis.wear_preload import named_or_wearing_preload
 from clutch_model.diagnosis.plain_rival import named_or_plain_rival
 from clutch_model.diagnosis.lockup import without_locked_torque
-from clutch_model.diagnosis.logger_pause import PACK_TOLERANCE_K, without_rows_after_pauses
+from clutch_model.diagnosis.logger_pause import FILM_TOLERANCE, TORQUE_TOLERANCE_NM, without_rows_after_pauses
 from clutch_model.diagnosis.run_level import within_run_forecast
 from clutch_model.diagnosis.force_dynamics import (named_or_constant_play, named_or_force_dynamics,
                                                    named_or_force_offset, named_or_sensor_dynamics,
@@ -710,8 +710,9 @@ def _diagnose_reading(nominal: ClutchModel, bench_model: ClutchModel, runs, held
         heats = [f"{p.run} {p.t1_s - p.t0_s:.2f} s" + (f" (heat {p.heat.heat_j / 1e3:.1f} kJ)" if p.heat else "")
                  for p in pauses]
         say(f"{len(pauses)} logger pause(s) of the inputs ({', '.join(heats)}): "
-            f"{int(paused.sum())} rows after them kept out of the residuals while the pack temperature may be "
-            f"off by more than {PACK_TOLERANCE_K:g} K")
+            f"{int(paused.sum())} rows after them kept out of the residuals while what the pause may have been "
+            f"moves the model's torque by more than {TORQUE_TOLERANCE_NM:g} N*m or its film by "
+            f"{FILM_TOLERANCE:.0%}")
         input_info = {**input_info, "logger_pauses": [p.as_dict() for p in pauses]}
     entry_rows = lock_entry_rows(campaign, lock_results)      # while the runs keep their slip samples
     # each topic's raw samples served the regridding and the lock-up detection; nothing after
