@@ -78,6 +78,7 @@ SLICE_AFTER_S = 300.0       # ... to this long after it, for its heat and its fa
 FILM_MEMORY_S = 0.5         # the pause's last instants whose force the film leaves it with
 TORQUE_TOLERANCE_NM = 1.0   # rows left out while the pause family's torques differ by more ...
 FILM_TOLERANCE = 0.01       # ... or its films (relative)
+SPREAD_WINDOW_S = 0.5       # the torques' spread averaged over this (a transient's single rows are not the pause's)
 MIN_LEVEL_ROWS = 50         # rows away from every pause needed for the run's torque level
 CHI2_95 = 3.841             # chi-square(1) 95 % point: the heat scale's likelihood-ratio interval
 
@@ -123,6 +124,7 @@ class PauseHeat:
     slip_rad_s: float
     window_rows: int
     level: float                 # the model's torque level fitted on the run's rows away from pauses
+    heat_scale_cap: float = 1.0  # the scale whose heat is the worst case's (the family's ceiling)
 
     def as_dict(self) -> dict:
         return {"heat_scale": round(self.heat_scale, 3),
@@ -130,7 +132,7 @@ class PauseHeat:
                 "heat_j": round(self.heat_j, 1), "pack_after_c": [round(x, 2) for x in self.pack_after_c],
                 "worst_case_bound_k": round(self.worst_case_bound_k, 2),
                 "slip_rad_s": round(self.slip_rad_s, 3), "window_rows": int(self.window_rows),
-                "torque_level": round(self.level, 4)}
+                "torque_level": round(self.level, 4), "heat_scale_cap": round(self.heat_scale_cap, 3)}
 
 
 def _silences(t: np.ndarray) -> np.ndarray:
@@ -298,6 +300,17 @@ def _with_pause_force_end(run, t0: float, t1: float, force_n: float):
     return out
 
 
+def _running_mean(t: np.ndarray, y: np.ndarray, window_s: float) -> np.ndarray:
+    """``y`` averaged over the rows within ``window_s`` centred on each (its own time grid)."""
+    if y.size < 2:
+        return y
+    from scipy.ndimage import uniform_filter1d
+
+    dt = float(np.median(np.diff(t)))
+    size = int(max(1, round(window_s / dt))) if dt > 0 else 1
+    return uniform_filter1d(y, size, mode="nearest")
+
+
 def fit_pause_heat(run, pauses: list, model, tolerance_nm: float = TORQUE_TOLERANCE_NM) -> tuple:
     """-> (run, pauses): each pause's heat estimated from the torque rows after it (module
     doc), the run driven through each pause at its estimate, and each pause's rows left out
@@ -312,6 +325,8 @@ def fit_pause_heat(run, pauses: list, model, tolerance_nm: float = TORQUE_TOLERA
 
     if not pauses or run.torque_measured_nm is None:
         return run, pauses
+    vector = model.vector()
+    capacity, plates = vector[L.PLATE_HEAT_CAPACITY], max(vector[L.N_SEPARATOR], 1.0)
     pauses = sorted(pauses, key=lambda p: p.t0_s)
     out = []
     for n, pause in enumerate(pauses):
@@ -372,9 +387,18 @@ def fit_pause_heat(run, pauses: list, model, tolerance_nm: float = TORQUE_TOLERA
             pack_lo, pack_hi = float(np.interp(lo, qs, packs)), float(np.interp(hi, qs, packs))
             heat_info = PauseHeat(q_hat, (lo, hi), heat, (pack_lo, pack_hat, pack_hi), pause.pack_bound_k,
                                   slip, int(window.sum()), level)
-            scales, base = sorted({lo, q_hat, hi}), simulate(q_hat)
+        # the worst case caps the heat: no more than the largest power near the pause kept up
+        # through it (a clutch locked at both edges took none)
+        worst_heat_j = pause.pack_bound_k * plates * capacity
+        heat_one = (evaluate(1.0), tried[1.0][4])[1] if slip != 0.0 else 0.0
+        q_cap = 1.0 if heat_one <= worst_heat_j else max(worst_heat_j / heat_one, 0.0)
+        if heat_info is not None:
+            lo, hi = heat_info.heat_scale_ci95
+            top = min(hi, max(heat_info.heat_scale, q_cap))
+            scales, base = sorted({min(lo, top), heat_info.heat_scale, top}), simulate(heat_info.heat_scale)
+            heat_info.heat_scale_cap = q_cap
         else:
-            scales, base = list(HEAT_SCALES[::5]), predict_campaign(model, Campaign([part]))
+            scales, base = [0.0, 0.5 * q_cap, q_cap], predict_campaign(model, Campaign([part]))
         # what the pause may have been: the heat scales its interval allows (their torques must
         # agree within the tolerance), and the force of its last instants at the least and the most
         # the edges had (their films must agree within FILM_TOLERANCE: the force's extra heat there
@@ -384,7 +408,7 @@ def fit_pause_heat(run, pauses: list, model, tolerance_nm: float = TORQUE_TOLERA
         packs_after = [float(p.pack_temperature_c[first_after]) for p in heat_family]
         after = hp & (tp >= t1)
         spread = np.ptp(torques[:, after], axis=0) if after.any() else np.zeros(0)
-        over = np.flatnonzero(spread > tolerance_nm)
+        over = np.flatnonzero(_running_mean(tp[after], spread, SPREAD_WINDOW_S) > tolerance_nm)
         end = float(tp[after][over[-1]]) if over.size else t1
         tn = np.asarray(part.t, float)
         near = ((tn >= t0 - POWER_WINDOW_S) & (tn <= t0)) | ((tn >= t1) & (tn <= t1 + POWER_WINDOW_S))
