@@ -26,10 +26,12 @@ that estimate cannot vouch for are kept out of every residual, like locked rows
   (a friction level the model gets wrong is not taken for heat). Its 95 % interval is a
   likelihood-ratio one, the residual variance inflated for its lag-1 autocorrelation.
 * **The rows left out** are those on which what the pause may have been still moves the
-  model: the torques of the heat scales the interval allows differ by more than
-  ``TORQUE_TOLERANCE_NM``, or the films left by the force of the pause's last
+  model: the torques of the heat scales the interval allows (capped at the worst case's heat
+  below: a clutch locked at both edges took none) differ by more than ``TORQUE_TOLERANCE_NM``
+  on any row, or the films left by the force of the pause's last
   ``FILM_MEMORY_S`` at the least and the most the edges had differ by more than
-  ``FILM_TOLERANCE``. The model's own sensitivity decides: near 40 °C a kelvin moves the
+  ``FILM_TOLERANCE``. This runs with the bench model, before any cause is known: a pause that
+  a hidden cause keeps it from estimating (an interval spanning every scale) is left out whole. The model's own sensitivity decides: near 40 °C a kelvin moves the
   friction 0.2-0.4 %, on a cold day (sump −8-3 °C) the viscous torque moves tens of N·m per
   kelvin. Without steady rows to estimate the heat from, the inputs stay as read and every
   scale from 0 to 1 is allowed.
@@ -78,7 +80,6 @@ SLICE_AFTER_S = 300.0       # ... to this long after it, for its heat and its fa
 FILM_MEMORY_S = 0.5         # the pause's last instants whose force the film leaves it with
 TORQUE_TOLERANCE_NM = 1.0   # rows left out while the pause family's torques differ by more ...
 FILM_TOLERANCE = 0.01       # ... or its films (relative)
-SPREAD_WINDOW_S = 0.5       # the torques' spread averaged over this (a transient's single rows are not the pause's)
 MIN_LEVEL_ROWS = 50         # rows away from every pause needed for the run's torque level
 CHI2_95 = 3.841             # chi-square(1) 95 % point: the heat scale's likelihood-ratio interval
 
@@ -300,17 +301,6 @@ def _with_pause_force_end(run, t0: float, t1: float, force_n: float):
     return out
 
 
-def _running_mean(t: np.ndarray, y: np.ndarray, window_s: float) -> np.ndarray:
-    """``y`` averaged over the rows within ``window_s`` centred on each (its own time grid)."""
-    if y.size < 2:
-        return y
-    from scipy.ndimage import uniform_filter1d
-
-    dt = float(np.median(np.diff(t)))
-    size = int(max(1, round(window_s / dt))) if dt > 0 else 1
-    return uniform_filter1d(y, size, mode="nearest")
-
-
 def fit_pause_heat(run, pauses: list, model, tolerance_nm: float = TORQUE_TOLERANCE_NM) -> tuple:
     """-> (run, pauses): each pause's heat estimated from the torque rows after it (module
     doc), the run driven through each pause at its estimate, and each pause's rows left out
@@ -408,7 +398,7 @@ def fit_pause_heat(run, pauses: list, model, tolerance_nm: float = TORQUE_TOLERA
         packs_after = [float(p.pack_temperature_c[first_after]) for p in heat_family]
         after = hp & (tp >= t1)
         spread = np.ptp(torques[:, after], axis=0) if after.any() else np.zeros(0)
-        over = np.flatnonzero(_running_mean(tp[after], spread, SPREAD_WINDOW_S) > tolerance_nm)
+        over = np.flatnonzero(spread > tolerance_nm)
         end = float(tp[after][over[-1]]) if over.size else t1
         tn = np.asarray(part.t, float)
         near = ((tn >= t0 - POWER_WINDOW_S) & (tn <= t0)) | ((tn >= t1) & (tn <= t1 + POWER_WINDOW_S))
