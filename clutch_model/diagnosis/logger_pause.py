@@ -249,16 +249,24 @@ def _edge_slip(run, t0: float, t1: float) -> float:
     return sign * float(np.max(np.abs(slip[near])))
 
 
-def _with_pause_slip(run, t0: float, t1: float, slip_rad_s: float):
-    """The run with the plant driven through the pause (its rows strictly inside (t0, t1), on
-    the rows and on a finer plant grid) at ``slip_rad_s``; the force as read across the pause."""
-    inside = (run.t > t0) & (run.t < t1)
-    out = replace(run, slip_speed_rad_s=np.where(inside, slip_rad_s, run.slip_speed_rad_s))
+def _with_inputs_over(run, a: float, b: float, **values):
+    """The run with its rows strictly inside (a, b), on the rows and on a finer plant grid, at
+    ``values`` (``slip_speed_rad_s`` and/or ``applied_force_n``)."""
+    grid_field = {"slip_speed_rad_s": "slip", "applied_force_n": "force"}
+    inside = (run.t > a) & (run.t < b)
+    out = replace(run, **{k: np.where(inside, v, getattr(run, k)) for k, v in values.items()})
     g = run.plant_grid
     if g is not None:
-        on = (g.t > t0) & (g.t < t1)
-        out = replace(out, plant_grid=replace(g, slip=np.where(on, slip_rad_s, g.slip)))
+        on = (g.t > a) & (g.t < b)
+        out = replace(out, plant_grid=replace(g, **{grid_field[k]: np.where(on, v, getattr(g, grid_field[k]))
+                                                    for k, v in values.items()}))
     return out
+
+
+def _with_pause_slip(run, t0: float, t1: float, slip_rad_s: float):
+    """The run with the plant driven through the pause at ``slip_rad_s``; the force as read
+    across the pause."""
+    return _with_inputs_over(run, t0, t1, slip_speed_rad_s=slip_rad_s)
 
 
 def _interval(q: np.ndarray, sse: np.ndarray, threshold: float) -> tuple:
@@ -291,14 +299,7 @@ def _slice(run, a: int, b: int):
 def _with_pause_force_end(run, t0: float, t1: float, force_n: float):
     """The run with the force over the pause's last FILM_MEMORY_S at ``force_n``: the film the
     plant leaves the pause with is what those last instants pressed it to."""
-    a = max(t0, t1 - FILM_MEMORY_S)
-    inside = (run.t > a) & (run.t < t1)
-    out = replace(run, applied_force_n=np.where(inside, force_n, run.applied_force_n))
-    g = run.plant_grid
-    if g is not None:
-        on = (g.t > a) & (g.t < t1)
-        out = replace(out, plant_grid=replace(g, force=np.where(on, force_n, g.force)))
-    return out
+    return _with_inputs_over(run, max(t0, t1 - FILM_MEMORY_S), t1, applied_force_n=force_n)
 
 
 def fit_pause_heat(run, pauses: list, model, tolerance_nm: float = TORQUE_TOLERANCE_NM) -> tuple:
