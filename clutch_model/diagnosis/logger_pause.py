@@ -30,10 +30,10 @@ that estimate cannot vouch for are kept out of every residual, like locked rows
   below: a clutch locked at both edges took none) differ by more than ``TORQUE_TOLERANCE_NM``
   on any row, or the films left by the force of the pause's last
   ``FILM_MEMORY_S`` at the least and the most the edges had differ by more than
-  ``FILM_TOLERANCE``. This runs with the bench model, before any cause is known: a pause that
-  a hidden cause keeps it from estimating (an interval spanning every scale) is left out whole. The model's own sensitivity decides: near 40 °C a kelvin moves the
+  ``FILM_TOLERANCE``. The model's own sensitivity decides: near 40 °C a kelvin moves the
   friction 0.2-0.4 %, on a cold day (sump −8-3 °C) the viscous torque moves tens of N·m per
-  kelvin. Without steady rows to estimate the heat from, the inputs stay as read and every
+  kelvin. This runs with the bench model, before any cause is known: a pause that a hidden
+  cause keeps it from estimating (an interval spanning every scale) is left out whole. Without steady rows to estimate the heat from, the inputs stay as read and every
   scale from 0 to 1 is allowed.
 
 Measured on that campaign with nothing hidden (the true model, pauses of 1.1-2.4 s): after
@@ -176,6 +176,11 @@ def _heat_transfer(p: np.ndarray, w_abs: np.ndarray, force_n: np.ndarray) -> np.
     return np.maximum(h, p[L.HTF_MIN])
 
 
+def _near_edges(t: np.ndarray, t0: float, t1: float) -> np.ndarray:
+    """Times within POWER_WINDOW_S of the pause's edges (before t0, after t1)."""
+    return ((t >= t0 - POWER_WINDOW_S) & (t <= t0)) | ((t >= t1) & (t <= t1 + POWER_WINDOW_S))
+
+
 def _near_power_w(run, t0: float, t1: float) -> float:
     """The largest slip power measured within POWER_WINDOW_S of the pause's edges."""
     s = run.samples.get("measured_torque")
@@ -185,8 +190,7 @@ def _near_power_w(run, t0: float, t1: float) -> float:
         tt, torque = run.t, run.torque_measured_nm
     if torque is None:
         return 0.0
-    near = (((tt >= t0 - POWER_WINDOW_S) & (tt <= t0)) | ((tt >= t1) & (tt <= t1 + POWER_WINDOW_S)))
-    near &= np.isfinite(torque)
+    near = _near_edges(tt, t0, t1) & np.isfinite(torque)
     if not near.any():
         return 0.0
     slip = np.interp(tt[near], run.t, np.asarray(run.slip_speed_rad_s, float))
@@ -240,7 +244,7 @@ def _edge_slip(run, t0: float, t1: float) -> float:
     """The largest slip (rad/s) of the rows within POWER_WINDOW_S of the pause's edges, signed
     as the last one before the pause."""
     t = np.asarray(run.t, float)
-    near = ((t >= t0 - POWER_WINDOW_S) & (t <= t0)) | ((t >= t1) & (t <= t1 + POWER_WINDOW_S))
+    near = _near_edges(t, t0, t1)
     if not near.any():
         return 0.0
     slip = np.asarray(run.slip_speed_rad_s, float)
@@ -305,8 +309,8 @@ def _with_pause_force_end(run, t0: float, t1: float, force_n: float):
 def fit_pause_heat(run, pauses: list, model, tolerance_nm: float = TORQUE_TOLERANCE_NM) -> tuple:
     """-> (run, pauses): each pause's heat estimated from the torque rows after it (module
     doc), the run driven through each pause at its estimate, and each pause's rows left out
-    while the torques predicted over what the pause may have been (``_pause_family``) differ by
-    more than ``tolerance_nm``. Without rows to estimate the heat from, the pause's inputs stay
+    while the torques predicted over what the pause may have been differ by more than
+    ``tolerance_nm`` or their films by more than FILM_TOLERANCE. Without rows to estimate the heat from, the pause's inputs stay
     as read and the family spans every heat scale."""
     from scipy.optimize import minimize_scalar
 
@@ -319,11 +323,11 @@ def fit_pause_heat(run, pauses: list, model, tolerance_nm: float = TORQUE_TOLERA
     vector = model.vector()
     capacity, plates = vector[L.PLATE_HEAT_CAPACITY], max(vector[L.N_SEPARATOR], 1.0)
     pauses = sorted(pauses, key=lambda p: p.t0_s)
+    t = np.asarray(run.t, float)
+    measured = np.asarray(run.torque_measured_nm, float)
+    had = np.isfinite(measured)
     out = []
     for n, pause in enumerate(pauses):
-        t = np.asarray(run.t, float)
-        measured = np.asarray(run.torque_measured_nm, float)
-        had = np.isfinite(measured)
         t0, t1 = pause.t0_s, pause.t1_s
         next_t0 = pauses[n + 1].t0_s if n + 1 < len(pauses) else np.inf
         a = int(np.searchsorted(t, t0 - LEAD_S))
@@ -381,28 +385,30 @@ def fit_pause_heat(run, pauses: list, model, tolerance_nm: float = TORQUE_TOLERA
         # the worst case caps the heat: no more than the largest power near the pause kept up
         # through it (a clutch locked at both edges took none)
         worst_heat_j = pause.pack_bound_k * plates * capacity
-        heat_one = (evaluate(1.0), tried[1.0][4])[1] if slip != 0.0 else 0.0
+        heat_one = 0.0
+        if slip != 0.0:
+            evaluate(1.0)
+            heat_one = tried[1.0][4]
         q_cap = 1.0 if heat_one <= worst_heat_j else max(worst_heat_j / heat_one, 0.0)
         if heat_info is not None:
             lo, hi = heat_info.heat_scale_ci95
             top = min(hi, max(heat_info.heat_scale, q_cap))
-            scales, base = sorted({min(lo, top), heat_info.heat_scale, top}), simulate(heat_info.heat_scale)
+            scales, as_read = sorted({min(lo, top), heat_info.heat_scale, top}), []
             heat_info.heat_scale_cap = q_cap
         else:
-            scales, base = [0.0, 0.5 * q_cap, q_cap], predict_campaign(model, Campaign([part]))
-        # what the pause may have been: the heat scales its interval allows (their torques must
-        # agree within the tolerance), and the force of its last instants at the least and the most
-        # the edges had (their films must agree within FILM_TOLERANCE: the force's extra heat there
-        # is the heat scales' to span)
-        heat_family = [base] + ([simulate(q) for q in scales] if slip != 0.0 else [])
+            scales, as_read = [0.0, 0.5 * q_cap, q_cap], [predict_campaign(model, Campaign([part]))]
+        # what the pause may have been: the heat scales its interval allows, and without an
+        # estimate the inputs as read (their torques must agree within the tolerance), and the
+        # force of its last instants at the least and the most the edges had (their films must
+        # agree within FILM_TOLERANCE: the force's extra heat there is the heat scales' to span)
+        heat_family = as_read + ([simulate(q) for q in scales] if slip != 0.0 else [])
         torques = np.array([np.asarray(p.torque_nm, float) for p in heat_family])
         packs_after = [float(p.pack_temperature_c[first_after]) for p in heat_family]
         after = hp & (tp >= t1)
         spread = np.ptp(torques[:, after], axis=0) if after.any() else np.zeros(0)
         over = np.flatnonzero(spread > tolerance_nm)
         end = float(tp[after][over[-1]]) if over.size else t1
-        tn = np.asarray(part.t, float)
-        near = ((tn >= t0 - POWER_WINDOW_S) & (tn <= t0)) | ((tn >= t1) & (tn <= t1 + POWER_WINDOW_S))
+        near = _near_edges(tp, t0, t1)
         if near.any():
             q_base = heat_info.heat_scale if heat_info is not None else None
             films = []
