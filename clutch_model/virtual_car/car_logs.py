@@ -100,6 +100,11 @@ Effects outside the catalog (``effects``: [{"name": ..., parameter: value}]):
                           0.02, force_ref_n 6000)  at zero pack force to tau_high_s at force_ref_n
                                      (linear, constant beyond): a valve or motor slowing with the
                                      load; mimics actuator_lag (a force-path effect)
+  actuator_oil_temperature_lag  tau_40_s  the pack force follows the measured force through a
+                         (coeff_per_c  first-order lag whose time constant follows the sump
+                          0.03)        temperature, tau_40_s * exp(-coeff_per_c (sump - 40 C)):
+                                     cold oil, slow valve; mimics actuator_lag (a force-path
+                                     effect)
   actuator_force_delay   delay_s     the pack force is the measured force delay_s late (linear
                                      between fine rows, the run's first force before it: a
                                      command or pressure signal on a slow bus); the slip and
@@ -222,6 +227,11 @@ EFFECTS = {
                                                 "first-order lag whose time constant grows linearly from "
                                                 "tau_low_s at zero pack force to tau_high_s at force_ref_n "
                                                 "(a valve or motor slowing with the load)"},
+    "actuator_oil_temperature_lag": {"kind": "force-path", "parameters": {"tau_40_s": 0.08, "coeff_per_c": 0.03},
+                                     "mimics": "actuator_lag", "catalog_equivalent": None,
+                                     "physics": "the pack force follows the measured force through a "
+                                                "first-order lag of time constant tau_40_s x exp(-coeff_per_c "
+                                                "x (sump - 40 C)): an actuator slower in cold oil"},
     "actuator_force_ceiling": {"kind": "force-path", "parameters": {"share_of_peak": 0.7},
                                "mimics": None, "catalog_equivalent": None,
                                "physics": "the pack force is min(F, share_of_peak x the campaign's largest "
@@ -671,6 +681,21 @@ def _force_dependent_lagged(force, run_start, tau_low_steps, tau_high_steps, for
 
 
 @njit(cache=True)
+def _oil_temperature_lagged(force, sump_c, run_start, tau_40_steps, coeff_per_c):
+    """The force each fine row reaches through a first-order lag whose time constant (in fine
+    rows) is ``tau_40_steps`` x exp(-coeff_per_c (sump - 40 C)), at the row's sump temperature
+    (exact for a request held over each row)."""
+    out = np.empty_like(force)
+    for k in range(force.size):
+        if k == 0 or run_start[k]:
+            out[k] = force[k]
+        else:
+            tau = tau_40_steps * math.exp(-coeff_per_c * (sump_c[k] - 40.0))
+            out[k] = out[k - 1] + (1.0 - math.exp(-1.0 / tau)) * (force[k] - out[k - 1])
+    return out
+
+
+@njit(cache=True)
 def _asymmetric_sensor(torque, run_start, tau_rise_steps, tau_fall_steps):
     """The reading each fine row gives through a first-order lag of ``tau_rise_steps`` fine
     rows while it moves away from zero toward the torque ((T - y) T > 0) and
@@ -777,6 +802,10 @@ def synthesize_car_logs(spec: CarLogSpec | None = None, base_model: ClutchModel 
         force_pack = _force_dependent_lagged(force_pack, run_start, float(by_force["tau_low_s"]) * spec.fine_rate_hz,
                                              float(by_force["tau_high_s"]) * spec.fine_rate_hz,
                                              float(by_force["force_ref_n"]))
+    oil = spec.effect_values("actuator_oil_temperature_lag")
+    if oil is not None:
+        force_pack = _oil_temperature_lagged(force_pack, np.ascontiguousarray(sump_all, float), run_start,
+                                             float(oil["tau_40_s"]) * spec.fine_rate_hz, float(oil["coeff_per_c"]))
     late = spec.effect_values("actuator_force_delay")
     if late is not None:
         force_pack = delay_signal(t_abs, force_pack, run_start, float(late["delay_s"]))

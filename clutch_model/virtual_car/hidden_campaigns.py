@@ -181,6 +181,7 @@ EFFECT_RANGES = {"torque_sensor_lowpass": ("tau_s", (0.02, 0.15)),
                  "torque_judder": ("amplitude", (0.04, 0.10)),
                  "actuator_asymmetric_lag": ("tau_release_s", (0.12, 0.3)),
                  "actuator_force_dependent_lag": ("tau_high_s", (0.12, 0.3)),
+                 "actuator_oil_temperature_lag": ("tau_40_s", (0.05, 0.12)),
                  "torque_sensor_asymmetric_lag": ("tau_fall_s", (0.08, 0.25)),
                  "torque_sensor_resonance": ("f_n_hz", (4.0, 9.0)),
                  "force_sensor_lag": ("tau_s", (0.04, 0.12)),
@@ -216,7 +217,7 @@ def _cases() -> dict:
                       "torque_sensor_asymmetric_lag", "slip_acceleration_friction",
                       "force_sensor_hysteresis", "torque_judder", "torque_sensor_resonance",
                       "force_sensor_lag", "actuator_force_delay", "actuator_force_ceiling",
-                      "torque_sensor_thermal_offset")]
+                      "torque_sensor_thermal_offset", "actuator_oil_temperature_lag")]
     # the torque sensor's scale a few per cent off: the calibration's, nothing to name
     out += [Case("torque_sensor_gain", "none", effects=("torque_sensor_gain",))]
     return {c.name: c for c in out}

@@ -11,7 +11,8 @@ EFFECT_NAMES = ("torque_sensor_lowpass", "torque_sensor_thermal_offset", "torque
                 "actuator_rate_limit", "actuator_second_order", "actuator_backlash", "torque_judder",
                 "force_sensor_hysteresis", "force_sensor_lag", "torque_sensor_gain", "force_sensor_offset",
                 "actuator_asymmetric_lag", "actuator_force_dependent_lag", "torque_sensor_asymmetric_lag",
-                "torque_sensor_resonance", "actuator_force_delay", "actuator_force_ceiling")
+                "torque_sensor_resonance", "actuator_force_delay", "actuator_force_ceiling",
+                "actuator_oil_temperature_lag")
 
 CHANNEL_KEYS = {"force": "applied_force", "slip": "slip_speed", "sump": "sump_temperature",
                 "torque": "measured_torque", "pack": "pack_temperature"}

@@ -458,6 +458,37 @@ def test_actuator_force_dependent_lag_slows_with_the_pack_force():
     assert truth["mimics"] == "actuator_lag" and on.spec.expected_cause == "unexplained"
 
 
+def test_actuator_oil_temperature_lag_is_slower_in_cold_oil():
+    """actuator_oil_temperature_lag: the plant sees the request through x' = (F - x) / tau,
+    tau = tau_40 exp(-c (sump - 40 C)) at the fine row's sump temperature (the request held over
+    each fine step; solve_ivp step by step), in a cold run and in a hot one; the cold run's
+    torque moves more (its lag is four times the hot run's)."""
+    from scipy.integrate import solve_ivp
+    from clutch_model.virtual_car.car_logs import CarLogSpec, synthesize_car_logs
+    tau_40, coeff = 0.1, 0.03
+    change = []
+    for sumps in ((30.0, 32.0), (75.0, 78.0)):
+        base = synthesize_car_logs(CarLogSpec(seed=2, n_runs=1, sump_range_c=sumps))
+        on = synthesize_car_logs(CarLogSpec(seed=2, n_runs=1, sump_range_c=sumps,
+                                            effects=[{"name": "actuator_oil_temperature_lag", "tau_40_s": tau_40}]))
+        t, request = base.runs[0].fine["t_s"], base.runs[0].fine["applied_force_n"]
+        sump = base.runs[0].fine["sump_temperature_c"]
+        pack = np.empty_like(request)
+        pack[0] = request[0]
+        for k in range(1, request.size):
+            tau = tau_40 * np.exp(-coeff * (sump[k] - 40.0))
+            pack[k] = solve_ivp(lambda _t, x: (request[k] - x) / tau, (t[k - 1], t[k]), [pack[k - 1]],
+                                rtol=1e-11, atol=1e-9).y[0, -1]
+        _assert_plant_driven_by(pack, on, base, rtol=1e-6, atol=1e-3, min_change_rms_nm=1.0)
+        slipping = ~(on.runs[0].fine["locked"] | base.runs[0].fine["locked"])
+        d = on.runs[0].fine["torque_nm"][slipping] - base.runs[0].fine["torque_nm"][slipping]
+        change.append(float(np.sqrt(np.mean(d ** 2))))
+    assert change[0] > 1.5 * change[1], change
+    truth = on.truth["effects"][0]
+    assert truth["parameters"] == {"tau_40_s": tau_40, "coeff_per_c": coeff}
+    assert truth["mimics"] == "actuator_lag" and on.spec.expected_cause == "unexplained"
+
+
 def test_torque_sensor_asymmetric_lag_reads_rises_fast_and_falls_slowly():
     """torque_sensor_asymmetric_lag: the plant is untouched, the reading is the noise-free
     measurement of the effect-free car through y' = (T - y) / tau, tau_rise while (T - y) T > 0,
