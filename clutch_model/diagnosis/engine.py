@@ -1649,6 +1649,16 @@ def _discovered_or_force_path(data: SelectionData, sel: Selection, discovery: Di
             checks["band"] = {**checks["band"], "force_sensor_play": rival}
         else:
             checks[kind] = rival
+        preload = rival.get("catalog_preload") or {}
+        if rival_sel.verdict == "named" and preload.get("named") and preload["held_out_rmse"] <= ext.rmse_alt:
+            # a force read high: the catalog's spring_preload (force_dynamics._read_high_is_the_preload)
+            why = (f"the extension found beyond the catalog ({', '.join(discovery.cause.parameters)}, held-out RMSE "
+                   f"{ext.rmse_alt:.2f} N*m) does no better on held-out data than the catalog's spring_preload "
+                   f"({preload['held_out_rmse']:.2f} N*m)")
+            say(f"discovery: not accepted: {why}")
+            rival_sel = replace(rival_sel, reason=f"{rival_sel.reason}; {why}")
+            return rival_sel, DiscoveryOutcome(replace(discovery.selection, verdict="unexplained", reason=why),
+                                               False, why), checks
         if rival_sel.verdict != "unexplained" or not rival["held_out_rmse"] <= ext.rmse_alt:
             continue
         why = (f"the extension found beyond the catalog ({', '.join(discovery.cause.parameters)}, held-out RMSE "
