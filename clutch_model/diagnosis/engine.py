@@ -55,7 +55,7 @@ from clutch_model.diagnosis.force_dynamics import (named_or_constant_play, named
                                                    none_or_constant_play,
                                                    none_or_force_sensor_lag, none_or_sensor_play,
                                                    none_or_force_offset, none_or_rate_limit, named_or_rate_limit)
-from clutch_model.diagnosis.lag_rivals import named_or_varying_lag
+from clutch_model.diagnosis.lag_rivals import named_lag_or_sensor_pole, named_or_varying_lag
 from clutch_model.diagnosis.sump_reading import choose_sump_reading
 from clutch_model.diagnosis.static_friction import fit_static_friction, lock_entry_rows, with_entry_torque
 from clutch_model.diagnosis.slip_acceleration import named_or_slip_acceleration, none_or_slip_acceleration
@@ -1057,6 +1057,8 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
     sel = degradation_within_runs(data, sel, base, say)
     # a named time mechanism against a force path beyond the catalog (force_dynamics.py)
     t0 = time.perf_counter()
+    # a small actuator lag beside a lag or delay on the measurement: one more sensor pole? (lag_rivals.py)
+    sel, sensor_pole = named_lag_or_sensor_pole(data, sel, campaign, sigma_guess, ALPHA, NAMED_GAIN_FRAC, say)
     sel, force_dynamics = named_or_force_dynamics(data, sel, campaign, sigma_guess, ALPHA, NAMED_GAIN_FRAC, say)
     # a named actuator lag against a slew-rate-limited force path (force_dynamics.py)
     sel, rate_limit = named_or_rate_limit(data, sel, campaign, sigma_guess, ALPHA, NAMED_GAIN_FRAC, say)
@@ -1068,6 +1070,8 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
     sel, lag_rivals = named_or_varying_lag(data, sel, campaign, sigma_guess, ALPHA, NAMED_GAIN_FRAC, say)
     if sensor_dynamics is not None:
         lag_rivals = {"second_order_torque_reading": sensor_dynamics, **(lag_rivals or {})}
+    if sensor_pole is not None:
+        lag_rivals = {"sensor_pole": sensor_pole, **(lag_rivals or {})}
     # and against a friction that follows the slip's acceleration (slip_acceleration.py)
     sel, slip_accel = named_or_slip_acceleration(data, sel, campaign, sigma_guess, ALPHA, NAMED_GAIN_FRAC, say)
     if slip_accel is not None:
