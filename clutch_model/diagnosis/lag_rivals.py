@@ -420,6 +420,23 @@ class SensorPoleObjective(ReadingObjective):
         return asymmetric_lagged_torque(pi.t, plant, pi.run_start, values[0], values[0])
 
 
+def pair_told_from_pole(data, r_named, r_pole, alpha: float, min_gain_frac: float) -> tuple:
+    """Does the named pair (residual ``r_named``) predict the held-out rows significantly
+    better than the sensor pole in the actuator lag's place (``r_pole``)? In innovations (at
+    ``alpha``, ``min_gain_frac``, a lower plain RMSE), or in plain squares over blocks (a cut of
+    ``min_gain_frac`` at ``alpha``, a lower plain RMSE) -> (told apart, the whitened comparison,
+    the plain cross-fit test)."""
+    from clutch_model.diagnosis.selection import _compare
+    from clutch_model.diagnosis.structure_test import DEFAULT_MAX_ORDER, plain_cross_fit_test
+
+    r_named, r_pole = np.asarray(r_named, float), np.asarray(r_pole, float)
+    head = _compare(data, r_pole, r_named, DEFAULT_MAX_ORDER)
+    plain = plain_cross_fit_test(r_pole, r_pole - r_named, data.test_mask, data.run_start, data.t)
+    told = bool(head.significant(alpha, min_gain_frac, plain_gain=True)) or \
+        bool(plain.significant(alpha, min_gain_frac) and head.rmse_alt < head.rmse_null)
+    return told, head, plain
+
+
 def named_lag_or_sensor_pole(data, sel, campaign, sigma_nm: float, alpha: float, min_gain_frac: float,
                              say=lambda msg: None):
     """``actuator_lag`` named beside one time mechanism on the measurement (``torque_sensor_lag``
@@ -440,7 +457,7 @@ def named_lag_or_sensor_pole(data, sel, campaign, sigma_nm: float, alpha: float,
     named beside the sensor lag (held-out mean square -33 %), a wrong name."""
     from clutch_model.diagnosis.candidates import ModelFit, fit_alone
     from clutch_model.diagnosis.force_dynamics import taken_out
-    from clutch_model.diagnosis.selection import Cause, _compare, parameter_ci95, residual
+    from clutch_model.diagnosis.selection import Cause, parameter_ci95, residual
     from clutch_model.diagnosis.structure_test import DEFAULT_MAX_ORDER
 
     ids = sel.cause_ids if sel.verdict == "named" else []
@@ -461,18 +478,13 @@ def named_lag_or_sensor_pole(data, sel, campaign, sigma_nm: float, alpha: float,
     obj = SensorPoleObjective(base, campaign, train, tau_named, sigma_nm, ridge)
     fit = _fit_from_best_start(obj, [[math.log(max(tau_named, LAG_BOUNDS_S[0]) * r)] for r in (0.5, 1.0, 2.0)],
                                40, "sensor_pole")
-    r_named, r_pole = residual(data, sel.final), residual(data, fit)
-    head = _compare(data, r_pole, r_named, DEFAULT_MAX_ORDER)         # the named pair against the pole
-    from clutch_model.diagnosis.structure_test import plain_cross_fit_test
-    plain = plain_cross_fit_test(r_pole, r_pole - r_named, data.test_mask, data.run_start, data.t)
+    told, head, plain = pair_told_from_pole(data, residual(data, sel.final), residual(data, fit), alpha,
+                                            min_gain_frac)
     found = {"parameters": {"tau_s": float(fit.parameters["tau_s"])}, "actuator_lag_tau_s": tau_named,
              "beside": measured[0], "held_out_rmse": float(head.rmse_null), "named_held_out_rmse": float(head.rmse_alt),
              "named_held_out_t": float(head.t_stat), "named_plain_cross_fit": {
                  "cut_frac": float(plain.cut_frac), "t": float(plain.t_stat), "p": float(plain.p_value),
-                 "blocks": int(plain.n_blocks)}}
-    told = bool(head.significant(alpha, min_gain_frac, plain_gain=True)) or \
-        bool(plain.significant(alpha, min_gain_frac) and head.rmse_alt < head.rmse_null)
-    found["told_apart"] = told
+                 "blocks": int(plain.n_blocks)}, "told_apart": told}
     say(f"one more sensor pole ({1e3 * found['parameters']['tau_s']:.3g} ms) in place of actuator_lag on held-out "
         f"rows: RMSE {head.rmse_null:.2f} vs {head.rmse_alt:.2f} N*m named; the named pair better at t = "
         f"{head.t_stat:.1f} (plain squares: {100 * plain.cut_frac:.0f} % cut at block t = {plain.t_stat:.2f})")

@@ -697,3 +697,106 @@ def test_an_oil_temperature_lag_is_recovered_and_one_lag_is_its_special_case():
     from clutch_model.formats.bag_reader import Campaign
     flat = Campaign([replace(r, sump_temperature_c=np.full(len(r), 60.0)) for r, _ in camp.slices()])
     assert "not told from one lag" in rival.not_told(flat, every)
+
+
+class _Fitted:
+    """A fitted model standing in for candidates.ModelFit: its prediction on every row, its
+    parameters, and the Jacobian of the prediction in one parameter (for the interval)."""
+
+    def __init__(self, predicted, parameters, slope=None):
+        self.predicted, self.parameters, self._slope = np.asarray(predicted, float), dict(parameters), slope
+
+    def predict(self, data):
+        return self.predicted
+
+    def sensitivity(self):
+        from clutch_model.diagnosis.selection import ParameterSensitivity
+        if self._slope is None:
+            return None
+        name, value = next(iter(self.parameters.items()))
+        return ParameterSensitivity([name], np.array([value]), np.asarray(self._slope, float)[:, None],
+                                    [lambda x: x])
+
+
+def test_a_force_read_high_that_takes_the_name_is_the_catalog_preload():
+    """Where nothing is named, a signed force offset that takes the name reading the force high
+    is the catalog's spring_preload: the selection's own preload candidate is named when it
+    matches the offset and beats the calibrated model as the offset did (in the innovations, or
+    by halving the plain held-out mean square over blocks), with an interval from its
+    sensitivity; a preload candidate that does not match the offset, or that leaves the whole
+    misfit, is not named and the verdict stays the offset's."""
+    from clutch_model.diagnosis.force_dynamics import _read_high_is_the_preload
+    from clutch_model.diagnosis.selection import CandidateScore, Selection, SelectionData, SelectionStep
+
+    t, run_start = _rows(60.0)
+    rng = np.random.default_rng(3)
+    noise = _ar1(rng, t.size, phi=0.95, sd=1.0)
+    misfit = 8.0 * np.sin(2 * np.pi * 0.3 * t) + 4.0        # what the calibration leaves of a preload
+    truth = 100.0 + 20.0 * np.sin(2 * np.pi * 0.7 * t)
+    y = truth + misfit + noise
+    train = (t % 6.0) < 4.0
+    data = SelectionData(y=y, t=t, run_start=run_start, train_mask=train, test_mask=~train)
+    calibrated = _Fitted(truth, {})
+
+    def selection(preload_n, leaves):
+        fitted = _Fitted(truth + (1.0 - leaves) * misfit, {"preload_n": preload_n}, slope=misfit / preload_n)
+        score = CandidateScore.__new__(CandidateScore)
+        score.id, score.fitted = "spring_preload", fitted
+        step = SelectionStep(scores=[score], chosen=None, lookalikes=[])
+        return Selection("none", [], [step], calibrated, None, None, [], {}, "nothing predicts it")
+
+    found = {"took_the_name": True}
+    named = _read_high_is_the_preload(data, selection(380.0, 0.0), found, 370.0, 1e-3, 0.005, lambda m: None)
+    assert named is not None and named.verdict == "named" and named.cause_ids == ["spring_preload"]
+    assert named.causes[0].parameters == {"preload_n": 380.0}
+    lo, hi = named.causes[0].parameters_ci95["preload_n"]
+    assert lo < 380.0 < hi
+    assert found["catalog_preload"]["named"] and found["catalog_equivalent"] == "spring_preload"
+    assert not found["took_the_name"]            # the offset did not take it: the catalog's preload did
+    # a candidate far from the offset, or one that leaves the whole misfit: the offset's verdict stands
+    for preload_n, leaves in ((120.0, 0.0), (380.0, 1.0)):
+        found = {"took_the_name": True}
+        assert _read_high_is_the_preload(data, selection(preload_n, leaves), found, 370.0, 1e-3, 0.005,
+                                         lambda m: None) is None
+        assert found["took_the_name"] and not found["catalog_preload"]["named"]
+
+
+def test_one_more_sensor_pole_is_recovered_on_top_of_a_named_sensor_lag():
+    """SensorPoleObjective (friction correction refitted): on noise-free torque read through the
+    catalog's 34 ms torque_sensor_lag and one more 5 ms pole, the model with the sensor lag gets
+    the 5 ms pole back within 10 %, and the pole's torque is the truth's."""
+    from clutch_model.diagnosis.lag_rivals import SensorPoleObjective, _fit_from_best_start
+    from clutch_model.plant.mechanisms import make_mechanism
+    from .noise_free_campaigns import reference_campaign, with_measured_torque
+
+    model, camp = reference_campaign(5, 4, 5.0, rate_hz=400.0)
+    run_start = np.zeros(camp.t.size, bool)
+    for _, sl in camp.slices():
+        run_start[sl.start] = True
+    sensor = make_mechanism("torque_sensor_lag", tau_s=0.034)
+    lagged = sensor.apply_to_measurement(camp.t, _plant_torque(model, camp), run_start)
+    truth = asymmetric_lagged_torque(np.asarray(camp.t, float), lagged, run_start, 0.005, 0.005)
+    base = model.with_mechanisms([sensor])
+    obj = SensorPoleObjective(base, with_measured_torque(camp, truth), np.ones(camp.t.size, bool), 0.01)
+    fit = _fit_from_best_start(obj, [[np.log(0.01 * r)] for r in (0.5, 1.0, 2.0)], 40, "sensor_pole")
+    assert fit.parameters["tau_s"] == pytest.approx(0.005, rel=0.1)
+    assert np.sqrt(np.mean((fit.predicted - truth) ** 2)) < 0.05 * np.std(truth - lagged) + 1e-6
+
+
+def test_a_pair_is_told_from_a_sensor_pole_only_when_it_predicts_better():
+    """The named pair (actuator_lag beside a measurement lag) against one more sensor pole in
+    the actuator lag's place: a pair that removes a misfit the pole leaves is told apart; a pair
+    no better than the pole (the same residual and its own noise) is not."""
+    from clutch_model.diagnosis.lag_rivals import pair_told_from_pole
+    from clutch_model.diagnosis.selection import SelectionData
+
+    t, run_start = _rows(60.0)
+    rng = np.random.default_rng(8)
+    noise = _ar1(rng, t.size, phi=0.9, sd=1.0)
+    train = (t % 6.0) < 4.0
+    data = SelectionData(y=noise, t=t, run_start=run_start, train_mask=train, test_mask=~train)
+    edges = 3.0 * np.exp(-((t % 0.5) / 0.03))                  # force edges the pole cannot follow
+    told, head, _ = pair_told_from_pole(data, noise, noise + edges, 1e-3, 0.005)
+    assert told and head.rmse_alt < head.rmse_null
+    told, _, plain = pair_told_from_pole(data, noise + 0.1 * _ar1(rng, t.size, phi=0.9, sd=1.0), noise, 1e-3, 0.005)
+    assert not told and plain.cut_frac < 0.005
