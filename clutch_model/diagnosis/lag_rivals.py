@@ -449,15 +449,19 @@ def named_lag_or_sensor_pole(data, sel, campaign, sigma_nm: float, alpha: float,
     (a lag on the force and one on the reading nearly commute where the plant is smooth). The
     reading's extra pole (the named model without the actuator lag, its reading through one
     more first-order lag, the friction correction refitted) takes its place; when the named
-    pair does not predict the held-out rows significantly better than it (at ``alpha``, in
-    innovations or in plain squares), nothing tells the actuator lag from a second pole of the
-    sensor: it is not named, and the measurement's mechanism is refitted alone on the model
-    without both. Measured on an outside generator's 34 ms torque_sensor_lag behind a 52 Hz
-    second-order Butterworth filter on the sensor: an actuator_lag of 2.45 ms [0.85, 4.16] was
-    named beside the sensor lag (held-out mean square -33 %), a wrong name."""
+    pair does not predict the held-out rows better than it at the level at which a named cause
+    must beat a lookalike (selection.LOOKALIKE_ALPHA, in innovations or in plain squares),
+    nothing tells the actuator lag from a second pole of the sensor: it is not named, and the
+    measurement's mechanism is refitted alone on the model without both. Measured on an outside
+    generator's 34 ms torque_sensor_lag behind a 52 Hz second-order Butterworth filter on the
+    sensor: an actuator_lag of 2.45 ms [0.85, 4.16] was named beside the sensor lag (held-out
+    mean square -33 %), a wrong name; the pole (at its 2 ms bound: one pole is not that filter's
+    shape) predicted the held-out rows at 3.25 against the pair's 2.81 N*m (t = 2.8): told
+    apart at 0.01, and the name stays wrong. At alpha = 1e-3 the lag was withdrawn and a 4 ms
+    transport_delay (the filter's group delay is 4.35 ms) named in its place, as wrong."""
     from clutch_model.diagnosis.candidates import ModelFit, fit_alone
     from clutch_model.diagnosis.force_dynamics import taken_out
-    from clutch_model.diagnosis.selection import Cause, parameter_ci95, residual
+    from clutch_model.diagnosis.selection import LOOKALIKE_ALPHA, Cause, parameter_ci95, residual
     from clutch_model.diagnosis.structure_test import DEFAULT_MAX_ORDER
 
     ids = sel.cause_ids if sel.verdict == "named" else []
@@ -478,7 +482,8 @@ def named_lag_or_sensor_pole(data, sel, campaign, sigma_nm: float, alpha: float,
     obj = SensorPoleObjective(base, campaign, train, tau_named, sigma_nm, ridge)
     fit = _fit_from_best_start(obj, [[math.log(max(tau_named, LAG_BOUNDS_S[0]) * r)] for r in (0.5, 1.0, 2.0)],
                                40, "sensor_pole")
-    told, head, plain = pair_told_from_pole(data, residual(data, sel.final), residual(data, fit), alpha,
+    # the pole is a runner-up explanation: the pair must beat it as a named cause beats a lookalike
+    told, head, plain = pair_told_from_pole(data, residual(data, sel.final), residual(data, fit), LOOKALIKE_ALPHA,
                                             min_gain_frac)
     found = {"parameters": {"tau_s": float(fit.parameters["tau_s"])}, "actuator_lag_tau_s": tau_named,
              "beside": measured[0], "held_out_rmse": float(head.rmse_null), "named_held_out_rmse": float(head.rmse_alt),
