@@ -420,6 +420,53 @@ class SensorPoleObjective(ReadingObjective):
         return asymmetric_lagged_torque(pi.t, plant, pi.run_start, values[0], values[0])
 
 
+SENSOR_POLE_BOUNDS_S = (2e-4, 0.1)
+
+
+class LagAndSensorPoleObjective(ForcePathObjective):
+    """The catalog's actuator lag on the force and one more first-order pole on the torque
+    reading (a sensor's anti-alias or bus filter): x = [log tau_lag, log tau_pole] then the
+    friction correction. Two lags in series, as an overdamped second-order force path is, but
+    the second one on the measurement."""
+
+    def __init__(self, base: ClutchModel, campaign, fit_mask, lag_s: float, pole_s: float,
+                 noise_sigma_nm: float = 1.0, ridge_factor: float = 1.0):
+        specs = [ParamSpec("tau_s", True, LAG_BOUNDS_S[0], LAG_BOUNDS_S[1],
+                           np.array([float(np.clip(lag_s, *LAG_BOUNDS_S))])),
+                 ParamSpec("sensor_tau_s", True, SENSOR_POLE_BOUNDS_S[0], SENSOR_POLE_BOUNDS_S[1],
+                           np.array([float(np.clip(pole_s, *SENSOR_POLE_BOUNDS_S))]))]
+        super().__init__(base, campaign, fit_mask, specs, noise_sigma_nm=noise_sigma_nm, ridge_factor=ridge_factor)
+
+    def _predict_xs(self, xs) -> np.ndarray:
+        from clutch_model.prediction import predict_campaign
+
+        pi = self._plant_inputs
+        xs = np.atleast_2d(np.asarray(xs, float))
+        out = np.empty((xs.shape[0], pi.n_rows))
+        groups: dict = {}
+        for k, x in enumerate(xs):
+            groups.setdefault(tuple(float(v) for v in x[:self.n_mech]), []).append(k)
+        for path_x, rows in groups.items():
+            lag_s, pole_s = (s.from_x(v) for s, v in zip(self.specs, path_x))
+            force = asymmetric_lagged_force(pi.t, pi.force, pi.run_start, lag_s, lag_s)
+            plant = predict_campaign([self.model_at(xs[k]) for k in rows], replace(pi, force=force), energy0_j=0.0,
+                                     on_grid=True).torque_nm
+            for j, k in enumerate(rows):
+                out[k] = pi.at_rows(asymmetric_lagged_torque(pi.t, np.ascontiguousarray(plant[j]), pi.run_start,
+                                                             pole_s, pole_s))
+        return out
+
+
+def fit_lag_and_sensor_pole(base: ClutchModel, campaign, fit_mask, lag_s: float, pole_s: float,
+                            noise_sigma_nm: float = 1.0, ridge_factor: float = 1.0):
+    """The actuator lag with one more sensor pole (``LagAndSensorPoleObjective``) on ``base``
+    (its time mechanisms taken out), started at the lag ``lag_s`` and the pole ``pole_s`` and
+    at half and twice that pole -> force_dynamics.ForcePathFit."""
+    obj = LagAndSensorPoleObjective(base, campaign, fit_mask, lag_s, pole_s, noise_sigma_nm, ridge_factor)
+    starts = [[math.log(max(lag_s, 1e-4)), math.log(max(r * pole_s, 1e-4))] for r in (0.5, 1.0, 2.0)]
+    return _fit_from_best_start(obj, starts, 40, "lag_and_sensor_pole")
+
+
 def pair_told_from_pole(data, r_named, r_pole, alpha: float, min_gain_frac: float) -> tuple:
     """Does the named pair (residual ``r_named``) predict the held-out rows significantly
     better than the sensor pole in the actuator lag's place (``r_pole``)? In innovations (at

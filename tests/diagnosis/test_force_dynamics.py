@@ -783,6 +783,31 @@ def test_one_more_sensor_pole_is_recovered_on_top_of_a_named_sensor_lag():
     assert np.sqrt(np.mean((fit.predicted - truth) ** 2)) < 0.05 * np.std(truth - lagged) + 1e-6
 
 
+def test_an_actuator_lag_and_a_sensor_pole_are_recovered_together():
+    """LagAndSensorPoleObjective (friction correction refitted): on noise-free torque from the
+    plant with the catalog's 60 ms actuator_lag, read through one more 3 ms pole (scipy.signal's
+    first-order system, each run from rest at its first value), both time constants come back
+    within 10 % from the path's rough split, and the torque is the truth's."""
+    from scipy import signal
+
+    from clutch_model.diagnosis.lag_rivals import fit_lag_and_sensor_pole
+    from clutch_model.plant.mechanisms import make_mechanism
+    from .noise_free_campaigns import reference_campaign, with_measured_torque
+
+    model, camp = reference_campaign(5, 4, 5.0, rate_hz=400.0)
+    t = np.asarray(camp.t, float)
+    plant = _plant_torque(model.with_mechanisms([make_mechanism("actuator_lag", tau_s=0.06)]), camp)
+    pole = signal.lti([1.0], [0.003, 1.0])
+    truth = np.empty_like(plant)
+    for _, sl in camp.slices():
+        u = plant[sl]
+        truth[sl] = u[0] + signal.lsim(pole, u - u[0], t[sl] - t[sl][0])[1]
+    fit = fit_lag_and_sensor_pole(model, with_measured_torque(camp, truth), np.ones(t.size, bool), 0.055, 0.006)
+    assert fit.parameters["tau_s"] == pytest.approx(0.06, rel=0.1)
+    assert fit.parameters["sensor_tau_s"] == pytest.approx(0.003, rel=0.1)
+    assert np.sqrt(np.mean((fit.predicted - truth) ** 2)) < 0.05 * np.std(truth - plant) + 1e-6
+
+
 def test_a_pair_is_told_from_a_sensor_pole_only_when_it_predicts_better():
     """The named pair (actuator_lag beside a measurement lag) against one more sensor pole in
     the actuator lag's place: a pair that removes a misfit the pole leaves is told apart; a pair
