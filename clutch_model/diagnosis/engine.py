@@ -61,7 +61,7 @@ from clutch_model.diagnosis.static_friction import fit_static_friction, lock_ent
 from clutch_model.diagnosis.slip_acceleration import named_or_slip_acceleration, none_or_slip_acceleration
 from clutch_model.diagnosis.torque_line import none_or_torque_line
 from clutch_model.diagnosis.torque_range import find_torque_rails, without_torque_at_rails
-from clutch_model.diagnosis.bench_anchor import named_and_bench_anchored, none_or_bench_anchored
+from clutch_model.diagnosis.bench_anchor import named_again_on_the_bench, named_and_bench_anchored, none_or_bench_anchored
 from clutch_model.diagnosis.fitting import (CANDIDATE_IDS, CandidateFit, fit_candidate, time_mechanism_ids,
                                           time_parameter_names)
 from clutch_model.diagnosis.friction_ridge import held_to_the_data
@@ -1258,6 +1258,20 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
             say(_ridge_line("extended", ext_ridge))
         if not on_bench:
             sel, extended_fit = extension_holds(sel, extended_fit, eval_mask, rmse["calibrated"], say)
+            if extended_fit is None:
+                # the cause again on the bench's friction: the calibration may have absorbed part of it
+                again, found_again = named_again_on_the_bench(data, sel, ctx, base, ALPHA, NAMED_GAIN_FRAC, say)
+                if found_again is not None:
+                    bench_anchor = {**(bench_anchor or {}), "extension_on_the_bench": found_again}
+                if again is not None:
+                    ext_again, _ = held_to_the_data(again.final.fit, campaign, fit_mask, energy_total, torque_scale,
+                                                    sigma_guess)
+                    if not _rmse(ext_again.residual, eval_mask) > rmse["calibrated"]:
+                        sel, extended_fit = again, ext_again
+                    else:
+                        found_again["named"] = False
+                        say(f"{again.cause_ids[0]} on the bench friction, written, predicts the held-out rows worse "
+                            f"than the calibrated model: no name holds")
         if extended_fit is None:
             cause = "unexplained"
         else:
