@@ -185,6 +185,13 @@ class _Check:
         if ok:
             self.passing.append((float(vs_bench.rmse_alt), cid, fitted, r, vs_bench))
 
+    def beats_both(self, r) -> tuple:
+        """Does a model with residual ``r`` predict the held-out rows significantly better than
+        the bench friction alone and than the calibrated model? -> (it does, the comparison
+        with the bench model, the one with the calibrated model; each the null)."""
+        vs_bench, vs_cal = self.compare(self.r_bench, r), self.compare(self.r_cal, r)
+        return bool(self.significant(vs_bench) and self.significant(vs_cal)), vs_bench, vs_cal
+
     def against_level(self, cid: str, fitted, level_base, ctx, train, say) -> tuple:
         """Does ``fitted`` (``cid`` on the bench friction) predict the held-out rows better than
         ``level_base`` with its friction moved by one constant (``fit_friction_level``)?
@@ -480,9 +487,7 @@ def named_again_on_the_bench(data, sel, ctx, calibrated_fit, alpha: float, min_g
                    alpha, min_gain_frac, cause=cid)
     say(f"the extension with {cid} did not hold: {cid} again on the bench friction ({check.gap_text()})")
     fitted = ModelFit(cid, fit_alone(ctx, cid, bench_base, train), bench_base, ctx, train.copy())
-    r = residual(data, fitted)
-    vs_bench, vs_cal = check.compare(check.r_bench, r), check.compare(check.r_cal, r)
-    ok = bool(check.significant(vs_bench) and check.significant(vs_cal))
+    ok, vs_bench, vs_cal = check.beats_both(residual(data, fitted))
     check.found.update({"parameters": {k: float(v) for k, v in fitted.parameters.items()},
                         "held_out_rmse": float(vs_bench.rmse_alt), "against_bench_t": float(vs_bench.t_stat),
                         "against_calibrated_t": float(vs_cal.t_stat), "named": False})
