@@ -134,17 +134,22 @@ class ForcePathObjective(CampaignObjective):
         """The force on the plant's rows through the path with parameter ``values`` (model units)."""
         raise NotImplementedError
 
+    def path_groups(self, xs) -> dict:
+        """The rows of ``xs`` by their path parameters (model units, a tuple): the parameter sets
+        that differ only in the friction correction (most of a Jacobian's columns) share one."""
+        groups: dict = {}
+        for k, x in enumerate(xs):
+            groups.setdefault(tuple(s.from_x(float(v)) for s, v in zip(self.specs, x[:self.n_mech])), []).append(k)
+        return groups
+
     def _predict_xs(self, xs) -> np.ndarray:
         """One simulation batch per force path: the parameter sets that differ only in the
-        friction correction (most of a Jacobian's columns) share the filtered force."""
+        friction correction share the filtered force."""
         pi = self._plant_inputs
         xs = np.atleast_2d(np.asarray(xs, float))
         out = np.empty((xs.shape[0], pi.n_rows))
-        groups: dict = {}
-        for k, x in enumerate(xs):
-            groups.setdefault(tuple(float(v) for v in x[:self.n_mech]), []).append(k)
-        for path_x, rows in groups.items():
-            force = self.path_force([s.from_x(v) for s, v in zip(self.specs, path_x)])
+        for path, rows in self.path_groups(xs).items():
+            force = self.path_force(list(path))
             out[rows] = predict_campaign([self.model_at(xs[k]) for k in rows], replace(pi, force=force),
                                          energy0_j=0.0).torque_nm
         return out

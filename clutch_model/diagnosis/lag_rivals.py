@@ -443,11 +443,7 @@ class LagAndSensorPoleObjective(ForcePathObjective):
         pi = self._plant_inputs
         xs = np.atleast_2d(np.asarray(xs, float))
         out = np.empty((xs.shape[0], pi.n_rows))
-        groups: dict = {}
-        for k, x in enumerate(xs):
-            groups.setdefault(tuple(float(v) for v in x[:self.n_mech]), []).append(k)
-        for path_x, rows in groups.items():
-            lag_s, pole_s = (s.from_x(v) for s, v in zip(self.specs, path_x))
+        for (lag_s, pole_s), rows in self.path_groups(xs).items():
             force = asymmetric_lagged_force(pi.t, pi.force, pi.run_start, lag_s, lag_s)
             plant = predict_campaign([self.model_at(xs[k]) for k in rows], replace(pi, force=force), energy0_j=0.0,
                                      on_grid=True).torque_nm

@@ -548,6 +548,7 @@ def test_a_force_path_whose_fast_pole_is_below_the_row_resolution_does_not_take_
     def head_to_head(*a, **k):
         return "compared", {"took_the_name": True}
     monkeypatch.setattr(FD, "_rival_in_place", head_to_head)
+    monkeypatch.setattr(FD, "_second_pole_on_the_sensor", lambda *a, **k: {"path_told_apart": True})
 
     monkeypatch.setattr(FD, "fit_second_order", fitted(36.7, 1.85))
     kept, found = FD.named_or_force_dynamics(data, sel, None, 1.0, 1e-3, 0.005)
@@ -557,6 +558,40 @@ def test_a_force_path_whose_fast_pole_is_below_the_row_resolution_does_not_take_
     for f_n, zeta in ((8.0, 1.5), (5.0, 0.6)):
         monkeypatch.setattr(FD, "fit_second_order", fitted(f_n, zeta))
         assert FD.named_or_force_dynamics(data, sel, None, 1.0, 1e-3, 0.005)[0] == "compared"
+
+
+def test_an_overdamped_path_not_told_from_a_sensor_pole_beside_the_lag_does_not_take_the_name(monkeypatch):
+    """A named actuator lag beaten by an overdamped force path whose fast pole the rows resolve
+    (10.5 Hz at 2.31: 66 and 3.5 ms): the path takes the name only when it is told from the lag
+    with one more pole on the torque reading; a ringing path never meets that check."""
+    from types import SimpleNamespace
+
+    from clutch_model.diagnosis import force_dynamics as FD
+
+    t = np.arange(0.0, 20.0, 0.002)
+    run_start = np.zeros(t.size, bool)
+    run_start[0] = True
+    data = SimpleNamespace(t=t, run_start=run_start, train_mask=np.ones(t.size, bool))
+    sel = SimpleNamespace(verdict="named", cause_ids=["actuator_lag"], final=object())
+    lag = SimpleNamespace(id="actuator_lag", values={"tau_s": 0.07})
+    monkeypatch.setattr(FD, "taken_out", lambda final, ids: ([lag], object(), 1.0))
+    monkeypatch.setattr(FD, "_rival_in_place", lambda *a, **k: ("unexplained", {"took_the_name": True}))
+    asked = []
+
+    def sensor(told):
+        def check(data, base, campaign, fit, poles, *a):
+            asked.append(poles)
+            return {"path_told_apart": told}
+        return check
+
+    for f_n, zeta, told, taken in ((10.5, 2.31, False, False), (10.5, 2.31, True, True), (5.0, 0.6, False, True)):
+        monkeypatch.setattr(FD, "fit_second_order",
+                            lambda *a, f_n=f_n, zeta=zeta, **k: SimpleNamespace(parameters={"f_n_hz": f_n,
+                                                                                           "damping": zeta}))
+        monkeypatch.setattr(FD, "_second_pole_on_the_sensor", sensor(told))
+        out, found = FD.named_or_force_dynamics(data, sel, None, 1.0, 1e-3, 0.005)
+        assert found["took_the_name"] is taken and (out == "unexplained") is taken, (f_n, zeta, told)
+    assert len(asked) == 2 and asked[0][0] == pytest.approx(0.066, rel=0.02) and asked[0][1] == pytest.approx(3.5e-3, rel=0.05)
 
 
 def _plant_torque(model, camp, force_delay_s=0.0):
