@@ -526,6 +526,23 @@ def test_an_overdamped_force_path_is_two_first_order_lags(f_n, zeta):
     assert overdamped_poles_s(f_n, 0.7) is None                 # it rings: no first-order pair
 
 
+def _named_lag(monkeypatch, row_s: float, tau_s: float):
+    """(data on 20 s of rows ``row_s`` apart, a selection that named actuator_lag at ``tau_s``),
+    force_dynamics.taken_out stubbed to take that lag out of an opaque model."""
+    from types import SimpleNamespace
+
+    from clutch_model.diagnosis import force_dynamics as FD
+
+    t = np.arange(0.0, 20.0, row_s)
+    run_start = np.zeros(t.size, bool)
+    run_start[0] = True
+    data = SimpleNamespace(t=t, run_start=run_start, train_mask=np.ones(t.size, bool))
+    sel = SimpleNamespace(verdict="named", cause_ids=["actuator_lag"], final=object())
+    lag = SimpleNamespace(id="actuator_lag", values={"tau_s": tau_s})
+    monkeypatch.setattr(FD, "taken_out", lambda final, ids: ([lag], object(), 1.0))
+    return data, sel
+
+
 def test_a_force_path_whose_fast_pole_is_below_the_row_resolution_does_not_take_the_name(monkeypatch):
     """A named actuator lag met by an overdamped rival whose second pole (1.3 ms) is shorter than
     half the 8 ms rows: the rival is the lag itself with a sub-row timing term, and the named lag
@@ -534,13 +551,7 @@ def test_a_force_path_whose_fast_pole_is_below_the_row_resolution_does_not_take_
 
     from clutch_model.diagnosis import force_dynamics as FD
 
-    t = np.arange(0.0, 20.0, 0.008)
-    run_start = np.zeros(t.size, bool)
-    run_start[0] = True
-    data = SimpleNamespace(t=t, run_start=run_start, train_mask=np.ones(t.size, bool))
-    sel = SimpleNamespace(verdict="named", cause_ids=["actuator_lag"], final=object())
-    lag = SimpleNamespace(id="actuator_lag", values={"tau_s": 0.015})
-    monkeypatch.setattr(FD, "taken_out", lambda final, ids: ([lag], object(), 1.0))
+    data, sel = _named_lag(monkeypatch, 0.008, 0.015)
 
     def fitted(f_n, zeta):
         return lambda *a, **k: SimpleNamespace(parameters={"f_n_hz": f_n, "damping": zeta})
@@ -568,13 +579,7 @@ def test_an_overdamped_path_not_told_from_a_sensor_pole_beside_the_lag_does_not_
 
     from clutch_model.diagnosis import force_dynamics as FD
 
-    t = np.arange(0.0, 20.0, 0.002)
-    run_start = np.zeros(t.size, bool)
-    run_start[0] = True
-    data = SimpleNamespace(t=t, run_start=run_start, train_mask=np.ones(t.size, bool))
-    sel = SimpleNamespace(verdict="named", cause_ids=["actuator_lag"], final=object())
-    lag = SimpleNamespace(id="actuator_lag", values={"tau_s": 0.07})
-    monkeypatch.setattr(FD, "taken_out", lambda final, ids: ([lag], object(), 1.0))
+    data, sel = _named_lag(monkeypatch, 0.002, 0.07)
     monkeypatch.setattr(FD, "_rival_in_place", lambda *a, **k: ("unexplained", {"took_the_name": True}))
     asked = []
 
