@@ -478,10 +478,12 @@ def named_again_on_the_bench(data, sel, ctx, calibrated_fit, alpha: float, min_g
     (selection.LOOKALIKE_ALPHA, any share of the innovation variance) and no worse than the
     calibrated model (``_Check.holds_on_the_bench``), better than the bench friction moved by
     one constant at the same level (a level off the bench's is not a catalog mechanism), and
-    its written model holds as an extension must. Measured on an outside generator's drag of 0.397 N*m/(rad/s) under a
-    closed-loop force and a torque gain wandering by 1-2 %: drag_torque was named at 0.410
-    (held-out t = 4.3) and its extension on the calibrated friction predicted the held-out rows at
-    7.52 against 7.17 N*m calibrated (the bench friction alone: 5.59): `unexplained`. On the
+    its written model holds as an extension must.
+
+    Measured on an outside generator's drag of 0.397 N*m/(rad/s) under a closed-loop force and
+    a torque gain wandering by 1-2 %: drag_torque was named at 0.410 (held-out t = 4.3) and its
+    extension on the calibrated friction predicted the held-out rows at 7.52 against 7.17 N*m
+    calibrated (the bench friction alone: 5.59): `unexplained`. On the
     bench friction it fitted 0.398 and predicted the held-out rows at 5.25 against 5.43 N*m
     for the bench alone (t = 2.6; the held-out spans stay off the campaign's extreme slips,
     where a drag shows most) and 7.03 calibrated: named, the unseen bags 3.50 -> 0.66 N*m

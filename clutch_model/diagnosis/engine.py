@@ -61,7 +61,8 @@ from clutch_model.diagnosis.static_friction import fit_static_friction, lock_ent
 from clutch_model.diagnosis.slip_acceleration import named_or_slip_acceleration, none_or_slip_acceleration
 from clutch_model.diagnosis.torque_line import none_or_torque_line
 from clutch_model.diagnosis.torque_range import find_torque_rails, without_torque_at_rails
-from clutch_model.diagnosis.bench_anchor import named_again_on_the_bench, named_and_bench_anchored, none_or_bench_anchored
+from clutch_model.diagnosis.bench_anchor import (named_again_on_the_bench, named_and_bench_anchored,
+                                                  none_or_bench_anchored)
 from clutch_model.diagnosis.fitting import (CANDIDATE_IDS, CandidateFit, fit_candidate, time_mechanism_ids,
                                           time_parameter_names)
 from clutch_model.diagnosis.friction_ridge import held_to_the_data

@@ -596,7 +596,8 @@ def test_an_overdamped_path_not_told_from_a_sensor_pole_beside_the_lag_does_not_
         monkeypatch.setattr(FD, "_second_pole_on_the_sensor", sensor(told))
         out, found = FD.named_or_force_dynamics(data, sel, None, 1.0, 1e-3, 0.005)
         assert found["took_the_name"] is taken and (out == "unexplained") is taken, (f_n, zeta, told)
-    assert len(asked) == 2 and asked[0][0] == pytest.approx(0.066, rel=0.02) and asked[0][1] == pytest.approx(3.5e-3, rel=0.05)
+    assert len(asked) == 2
+    assert asked[0][0] == pytest.approx(0.066, rel=0.02) and asked[0][1] == pytest.approx(3.5e-3, rel=0.05)
 
 
 def _plant_torque(model, camp, force_delay_s=0.0):
