@@ -192,9 +192,9 @@ class _Check:
         the calibrated model in plain RMSE (the bar of a written extension,
         engine.extension_holds)? -> (it does, the comparison with the bench model, the one with
         the calibrated model; each the null)."""
-        from clutch_model.diagnosis.lag_rivals import pair_told_from_pole
+        from clutch_model.diagnosis.selection import predicts_better
 
-        told, vs_bench, _ = pair_told_from_pole(self.data, r, self.r_bench, self.alpha, self.min_gain_frac)
+        told, vs_bench, _ = predicts_better(self.data, r, self.r_bench, self.alpha, self.min_gain_frac)
         vs_cal = self.compare(self.r_cal, r)
         return bool(told and not vs_cal.rmse_alt > vs_cal.rmse_null), vs_bench, vs_cal
 
@@ -462,8 +462,7 @@ def named_and_bench_anchored(data, sel, ctx, candidate_ids, alpha: float, min_ga
     return replace(sel, causes=causes, final=pair, reason=why), check.found
 
 
-def named_again_on_the_bench(data, sel, ctx, calibrated_fit, alpha: float, min_gain_frac: float,
-                             say=lambda msg: None):
+def named_again_on_the_bench(data, sel, ctx, calibrated_fit, say=lambda msg: None):
     """One cause named whose extension lost on the held-out rows (engine.extension_holds: the
     cause written on the calibrated friction predicted them worse than the calibrated model),
     fitted again on the bench's friction -> (the selection naming it there, or None; what the
@@ -473,7 +472,7 @@ def named_again_on_the_bench(data, sel, ctx, calibrated_fit, alpha: float, min_g
     slope and the slip terms of the friction), the cause on top of it counts that part twice,
     and the calibrated friction itself extrapolates that share to the held-out rows. On the
     friction the bench measured the cause carries its whole effect. The selection named it
-    already (at ``alpha``, ``min_gain_frac``), and this confirms it: it is named there when it
+    already (at its level and share of the innovation variance), and this confirms it: it is named there when it
     predicts the held-out rows better than the bench friction alone at the lookalike level
     (selection.LOOKALIKE_ALPHA, any share of the innovation variance) and no worse than the
     calibrated model (``_Check.holds_on_the_bench``), better than the bench friction moved by
@@ -497,7 +496,7 @@ def named_again_on_the_bench(data, sel, ctx, calibrated_fit, alpha: float, min_g
     cid = sel.closest[0]
     train = np.asarray(data.train_mask, bool)
     bench_base = ctx.bench_model.with_mechanisms(list(calibrated_fit.model.mechanisms))
-    # a confirmation of what the selection found at alpha and min_gain_frac, not a new finding:
+    # a confirmation of what the selection found at its level, not a new finding:
     # better at the level at which a named cause must beat a lookalike, any share of the variance
     check = _Check(data, residual(data, _bench_alone(ctx, bench_base, train)), residual(data, calibrated_fit),
                    LOOKALIKE_ALPHA, 0.0, cause=cid)

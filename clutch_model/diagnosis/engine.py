@@ -1261,7 +1261,7 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
             sel, extended_fit = extension_holds(sel, extended_fit, eval_mask, rmse["calibrated"], say)
             if extended_fit is None:
                 # the cause again on the bench's friction: the calibration may have absorbed part of it
-                again, found_again = named_again_on_the_bench(data, sel, ctx, base, ALPHA, NAMED_GAIN_FRAC, say)
+                again, found_again = named_again_on_the_bench(data, sel, ctx, base, say)
                 if found_again is not None:
                     bench_anchor = {**(bench_anchor or {}), "extension_on_the_bench": found_again}
                 if again is not None:

@@ -403,15 +403,15 @@ def _second_pole_on_the_sensor(data, base, campaign, fit, poles, sigma_nm: float
     in the selection at the data's ridge a 1.7 ms pole was not told from the path (t = 2.0), and
     actuator_lag was named at 69 ms [67, 71], the unseen bags 42.9 -> 1.97 N*m.
     -> what the check found (``path_told_apart``)."""
-    from clutch_model.diagnosis.lag_rivals import fit_lag_and_sensor_pole, pair_told_from_pole
-    from clutch_model.diagnosis.selection import LOOKALIKE_ALPHA, residual
+    from clutch_model.diagnosis.lag_rivals import fit_lag_and_sensor_pole
+    from clutch_model.diagnosis.selection import LOOKALIKE_ALPHA, predicts_better, residual
 
     say(f"the force path is a lag of {1e3 * poles[0]:.3g} ms and one of {1e3 * poles[1]:.2g} ms in series: checking "
         f"the second on the torque reading")
     rival = fit_lag_and_sensor_pole(base, campaign, np.asarray(data.train_mask, bool), poles[0], poles[1], sigma_nm,
                                     ridge)
-    told, head, plain = pair_told_from_pole(data, residual(data, fit), residual(data, rival), LOOKALIKE_ALPHA,
-                                            min_gain_frac)
+    told, head, plain = predicts_better(data, residual(data, fit), residual(data, rival), LOOKALIKE_ALPHA,
+                                        min_gain_frac)
     say(f"actuator_lag {1e3 * rival.parameters['tau_s']:.3g} ms with a sensor pole of "
         f"{1e3 * rival.parameters['sensor_tau_s']:.2g} ms on held-out rows: RMSE {head.rmse_null:.2f} vs "
         f"{head.rmse_alt:.2f} N*m for the force path (t = {head.t_stat:.1f}); "

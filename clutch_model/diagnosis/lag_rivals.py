@@ -463,23 +463,6 @@ def fit_lag_and_sensor_pole(base: ClutchModel, campaign, fit_mask, lag_s: float,
     return _fit_from_best_start(obj, starts, 40, "lag_and_sensor_pole")
 
 
-def pair_told_from_pole(data, r_named, r_pole, alpha: float, min_gain_frac: float) -> tuple:
-    """Does the named pair (residual ``r_named``) predict the held-out rows significantly
-    better than the sensor pole in the actuator lag's place (``r_pole``)? In innovations (at
-    ``alpha``, ``min_gain_frac``, a lower plain RMSE), or in plain squares over blocks (a cut of
-    ``min_gain_frac`` at ``alpha``, a lower plain RMSE) -> (told apart, the whitened comparison,
-    the plain cross-fit test)."""
-    from clutch_model.diagnosis.selection import _compare
-    from clutch_model.diagnosis.structure_test import DEFAULT_MAX_ORDER, plain_cross_fit_test
-
-    r_named, r_pole = np.asarray(r_named, float), np.asarray(r_pole, float)
-    head = _compare(data, r_pole, r_named, DEFAULT_MAX_ORDER)
-    plain = plain_cross_fit_test(r_pole, r_pole - r_named, data.test_mask, data.run_start, data.t)
-    told = bool(head.significant(alpha, min_gain_frac, plain_gain=True)) or \
-        bool(plain.significant(alpha, min_gain_frac) and head.rmse_alt < head.rmse_null)
-    return told, head, plain
-
-
 def named_lag_or_sensor_pole(data, sel, campaign, sigma_nm: float, alpha: float, min_gain_frac: float,
                              say=lambda msg: None):
     """``actuator_lag`` named beside one time mechanism on the measurement (``torque_sensor_lag``
@@ -504,7 +487,7 @@ def named_lag_or_sensor_pole(data, sel, campaign, sigma_nm: float, alpha: float,
     transport_delay (the filter's group delay is 4.35 ms) named in its place, as wrong."""
     from clutch_model.diagnosis.candidates import ModelFit, fit_alone
     from clutch_model.diagnosis.force_dynamics import taken_out
-    from clutch_model.diagnosis.selection import LOOKALIKE_ALPHA, Cause, parameter_ci95, residual
+    from clutch_model.diagnosis.selection import LOOKALIKE_ALPHA, Cause, parameter_ci95, predicts_better, residual
     from clutch_model.diagnosis.structure_test import DEFAULT_MAX_ORDER
 
     ids = sel.cause_ids if sel.verdict == "named" else []
@@ -526,8 +509,8 @@ def named_lag_or_sensor_pole(data, sel, campaign, sigma_nm: float, alpha: float,
     fit = _fit_from_best_start(obj, [[math.log(max(tau_named, LAG_BOUNDS_S[0]) * r)] for r in (0.5, 1.0, 2.0)],
                                40, "sensor_pole")
     # the pole is a runner-up explanation: the pair must beat it as a named cause beats a lookalike
-    told, head, plain = pair_told_from_pole(data, residual(data, sel.final), residual(data, fit), LOOKALIKE_ALPHA,
-                                            min_gain_frac)
+    told, head, plain = predicts_better(data, residual(data, sel.final), residual(data, fit), LOOKALIKE_ALPHA,
+                                        min_gain_frac)
     found = {"parameters": {"tau_s": float(fit.parameters["tau_s"])}, "actuator_lag_tau_s": tau_named,
              "beside": measured[0], "held_out_rmse": float(head.rmse_null), "named_held_out_rmse": float(head.rmse_alt),
              "named_held_out_t": float(head.t_stat), "named_plain_cross_fit": {

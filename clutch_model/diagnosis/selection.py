@@ -312,6 +312,20 @@ def _compare(data, resid_null, resid_alt, max_order):
                              max_order=max_order)
 
 
+def predicts_better(data, r_better, r_other, alpha: float, min_gain_frac: float) -> tuple:
+    """Does the model with residual ``r_better`` predict the held-out rows significantly better
+    than the one with ``r_other``? In innovations (at ``alpha``, ``min_gain_frac``, a lower
+    plain RMSE), or in plain squares over blocks (a cut of ``min_gain_frac`` at ``alpha``, a
+    lower plain RMSE) -> (it does, the whitened comparison, the plain cross-fit test; each with
+    ``r_other`` the null)."""
+    r_better, r_other = np.asarray(r_better, float), np.asarray(r_other, float)
+    head = _compare(data, r_other, r_better, DEFAULT_MAX_ORDER)
+    plain = plain_cross_fit_test(r_other, r_other - r_better, data.test_mask, data.run_start, data.t)
+    better = bool(head.significant(alpha, min_gain_frac, plain_gain=True)) or \
+        bool(plain.significant(alpha, min_gain_frac) and head.rmse_alt < head.rmse_null)
+    return better, head, plain
+
+
 def _remainder_test(data, resid, alpha, min_gain_frac, max_order, fitted=None):
     """The flexible residual model, and the per-run one when there are per-run columns (each
     at alpha / 2); the more significant result is returned. Else the held-out excess: found

@@ -853,8 +853,7 @@ def test_a_pair_is_told_from_a_sensor_pole_only_when_it_predicts_better():
     """The named pair (actuator_lag beside a measurement lag) against one more sensor pole in
     the actuator lag's place: a pair that removes a misfit the pole leaves is told apart; a pair
     no better than the pole (the same residual and its own noise) is not."""
-    from clutch_model.diagnosis.lag_rivals import pair_told_from_pole
-    from clutch_model.diagnosis.selection import SelectionData
+    from clutch_model.diagnosis.selection import SelectionData, predicts_better
 
     t, run_start = _rows(60.0)
     rng = np.random.default_rng(8)
@@ -862,7 +861,7 @@ def test_a_pair_is_told_from_a_sensor_pole_only_when_it_predicts_better():
     train = (t % 6.0) < 4.0
     data = SelectionData(y=noise, t=t, run_start=run_start, train_mask=train, test_mask=~train)
     edges = 3.0 * np.exp(-((t % 0.5) / 0.03))                  # force edges the pole cannot follow
-    told, head, _ = pair_told_from_pole(data, noise, noise + edges, 1e-3, 0.005)
+    told, head, _ = predicts_better(data, noise, noise + edges, 1e-3, 0.005)
     assert told and head.rmse_alt < head.rmse_null
-    told, _, plain = pair_told_from_pole(data, noise + 0.1 * _ar1(rng, t.size, phi=0.9, sd=1.0), noise, 1e-3, 0.005)
+    told, _, plain = predicts_better(data, noise + 0.1 * _ar1(rng, t.size, phi=0.9, sd=1.0), noise, 1e-3, 0.005)
     assert not told and plain.cut_frac < 0.005
