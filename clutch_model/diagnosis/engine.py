@@ -48,6 +48,7 @@ from clutch_model.diagnosis.sump_offset import named_or_sump_offset, none_or_sum
 from clutch_model.diagnosis.wear_preload import named_or_wearing_preload
 from clutch_model.diagnosis.plain_rival import named_or_plain_rival
 from clutch_model.diagnosis.lockup import without_locked_torque
+from clutch_model.diagnosis.stick_band import without_stick_band
 from clutch_model.diagnosis.logger_pause import FILM_TOLERANCE, TORQUE_TOLERANCE_NM, without_rows_after_pauses
 from clutch_model.diagnosis.run_level import within_run_forecast
 from clutch_model.diagnosis.force_dynamics import (named_or_constant_play, named_or_force_dynamics,
@@ -704,6 +705,12 @@ def _diagnose_reading(nominal: ClutchModel, bench_model: ClutchModel, runs, held
     # lock-up phases (found from the data, diagnosis.lockup): the driveline sets the torque
     torque_by_run = [r.torque_measured_nm for r in campaign.runs]
     campaign, locked, lock_results = without_locked_rows(campaign, nominal.lock_slip_rad_s)
+    # slipping rows where the slip reading does not resolve the friction's Stribeck transition:
+    # the model's torque there follows the slip sensor's steps and noise (stick_band)
+    campaign, stick = without_stick_band(campaign, bench_model, lock_results, input_noise.torque_noise_hf_nm)
+    if stick.rows:
+        say(stick.describe())
+        input_info = {**input_info, **stick.to_dict()}
     # a logger pause (every input silent at once): the pack's heat in it estimated from the rows
     # after it, those rows left out while that estimate leaves the pack temperature uncertain
     campaign, paused, pauses = without_rows_after_pauses(campaign, bench_model)
