@@ -34,6 +34,7 @@ from typing import Callable, Protocol, Sequence
 
 import numpy as np
 
+from clutch_model.diagnosis.features import time_derivative
 from clutch_model.diagnosis.noise_model import DEFAULT_MAX_ORDER, segments_of
 from clutch_model.diagnosis.structure_test import (ALPHA, BLOCK_S, MIN_GAIN_FRAC, PredictiveComparison,
                                                    StructureResult, block_labels, compare_residuals,
@@ -213,7 +214,7 @@ def sub_row_timing(data: SelectionData, predicted: np.ndarray, resid: np.ndarray
             seg = pred[a:b]
             ok = np.isfinite(seg)
             if ok.all():
-                dp[a:b] = np.gradient(seg, t[a:b])
+                dp[a:b] = time_derivative(seg, t[a:b])
     fit = np.asarray(data.train_mask, bool) & np.isfinite(resid) & np.isfinite(dp)
     den = float(np.sum(dp[fit] ** 2))
     if not den > 0:

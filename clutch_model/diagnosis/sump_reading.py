@@ -48,6 +48,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from clutch_model.diagnosis.features import time_derivative
 from clutch_model.diagnosis.input_timing import READING_MIN_DIFFERENCE_NM
 
 SMOOTH_WINDOW_S = 2.0
@@ -141,7 +142,7 @@ def choose_sump_reading(campaign, model, noise_nm: float = 0.0, max_rows: int = 
         return SumpReading(logged=False, beta=float("nan"), rows=n, difference_rms_nm=rms, least_nm=least)
     # the smoothed prediction's rate: a lag or delay in the data (torque ~ p - tau dp/dt) moves
     # engagement transients as a colder film does, and without it takes the weight
-    rate = np.concatenate([np.gradient(p_smooth[sl], head.t[sl]) if sl.stop - sl.start > 1
+    rate = np.concatenate([time_derivative(p_smooth[sl], head.t[sl]) if sl.stop - sl.start > 1
                            else np.zeros(sl.stop - sl.start) for _, sl in head.slices()])
     ok_rate = np.isfinite(rate[ok])
     X = np.column_stack([d, p_smooth[ok], np.ones(n), np.where(ok_rate, rate[ok], 0.0)])
