@@ -23,9 +23,9 @@ def _logged(true_slip, quantum, noise_sd, seed=0):
     return np.round(x / quantum) * quantum
 
 
-def _model_torque(slip):
-    """The model's torque at the logged slip, scaled so the true slip gives TORQUE_NM (full
-    friction law, k_V included)."""
+def _friction(slip):
+    """The reference clutch's friction coefficient at ``slip`` (the full law, k_V included), at
+    the tests' force and sump temperature."""
     p = np.full(np.size(slip), FORCE_N / MODEL.nominal_area_m2 / 1e6)
     th = np.full(np.size(slip), SUMP_C)
     mu = stribeck(MODEL.friction_coefficients, MODEL.friction_exponent, np.abs(slip), p, th)
@@ -45,8 +45,8 @@ def test_quantised_slip_near_stick_is_left_out_and_the_model_jumps_there():
     assert flagged.mean() > 0.5
     # independent: the model given the logged slip moves by far more than the torque's noise
     # from row to row (relative to its value at the true slip, times the torque)
-    mu_true = _model_torque(np.array([0.04]))[0]
-    torque = TORQUE_NM * _model_torque(logged) / mu_true
+    mu_true = _friction(np.array([0.04]))[0]
+    torque = TORQUE_NM * _friction(logged) / mu_true
     assert np.std(np.diff(torque)) / np.sqrt(2.0) > 5 * TORQUE_NOISE_NM
 
 
@@ -55,8 +55,8 @@ def test_the_same_sensor_well_above_the_transition_leaves_nothing_out():
     resolution = np.hypot(noise, quantum / np.sqrt(12.0))
     logged = _logged(2.0, quantum, noise)
     assert not _flags(logged, resolution).any()
-    mu_true = _model_torque(np.array([2.0]))[0]
-    torque = TORQUE_NM * _model_torque(logged) / mu_true
+    mu_true = _friction(np.array([2.0]))[0]
+    torque = TORQUE_NM * _friction(logged) / mu_true
     assert np.std(np.diff(torque)) / np.sqrt(2.0) < TORQUE_NOISE_NM
 
 
@@ -65,8 +65,8 @@ def test_the_viscous_slope_alone_leaves_nothing_out():
     # the band is the Stribeck transition's (module docstring)
     noise = 0.06
     logged = _logged(6.0, 1e-6, noise)
-    mu_true = _model_torque(np.array([6.0]))[0]
-    torque = 2000.0 * _model_torque(logged) / mu_true
+    mu_true = _friction(np.array([6.0]))[0]
+    torque = 2000.0 * _friction(logged) / mu_true
     quiet = 0.05
     assert np.std(torque) > 3 * quiet
     flagged = stick_band_rows(logged, np.full(N, FORCE_N), np.full(N, SUMP_C), np.full(N, 2000.0), MODEL,
