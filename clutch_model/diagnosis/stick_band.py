@@ -26,11 +26,11 @@ as the torque's scale that is a torque uncertainty of |T| |mu(|w|+s) - mu(|w|-s)
 A row is kept out of the residuals where it exceeds STICK_BAND_NOISE_FACTOR times the torque
 sensor's noise near Nyquist. The friction is the given model's (the diagnosis gives its bench
 fit) at the row's pressure (force / A_N) and sump temperature, its Stribeck transition alone:
-the band ends sharply a few omega_S above zero. The viscous slope k_V is left out: it carries the slip noise into the
-torque at every slip, smoothly, and where that noise matters against a quiet torque sensor the
-slip is smoothed instead (input_hold). With it, a campaign whose torque sensor is quiet near
-Nyquist (0.12 N*m) and one of whose slip sensors is noisy (0.06 rad/s) lost 5 % of its rows,
-up to 6.5 rad/s of slip. The static friction fit (static_friction.py) still reads these
+the band ends sharply a few omega_S above zero. The viscous slope k_V is left out: it carries
+the slip noise into the torque at every slip, smoothly, and where that noise matters against
+a quiet torque sensor the slip is smoothed instead (input_hold). With it, a campaign whose
+torque sensor is quiet near Nyquist (0.12 N*m) and one of whose slip sensors is noisy
+(0.06 rad/s) lost 5 % of its rows, up to 6.5 rad/s of slip. The static friction fit (static_friction.py) still reads these
 rows: it is fitted on the torque before any row is left out.
 """
 from __future__ import annotations
