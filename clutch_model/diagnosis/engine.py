@@ -705,6 +705,12 @@ def _diagnose_reading(nominal: ClutchModel, bench_model: ClutchModel, runs, held
     # lock-up phases (found from the data, diagnosis.lockup): the driveline sets the torque
     torque_by_run = [r.torque_measured_nm for r in campaign.runs]
     campaign, locked, lock_results = without_locked_rows(campaign, nominal.lock_slip_rad_s)
+    lead_s = max((r.slip_reading_lead_s for r in lock_results), default=0.0)
+    if lead_s > 0.0:
+        say(f"zero crossings: the measured torque flips {1e3 * lead_s:.1f} ms before the logged slip crosses "
+            f"(median of {sum(x is not None for r in lock_results for x in r.crossing_leads_s)} flips); "
+            f"each crossing's rows widened back to the flip")
+    input_info = {**input_info, "slip_reading_lead_s": lead_s}
     # slipping rows where the slip reading does not resolve the friction's Stribeck transition:
     # the model's torque there follows the slip sensor's steps and noise (stick_band)
     campaign, stick = without_stick_band(campaign, bench_model, lock_results, input_noise.torque_noise_hf_nm)
