@@ -258,9 +258,9 @@ def with_torque_flips(results: list, campaign) -> float:
     wheel encoder's counts over a window logs the crossing half a window late, and no clutch
     mechanism makes the torque flip before the slip that drives it. The model given that slip
     keeps the old sign meanwhile and is off by twice the torque: on an outside generator's
-    `none` (slip from two encoders, windows 67-97 ms) the torque led the logged slip by 23-71 ms
-    (median 37) at each of 10 crossings, and the rows in between, 0.3 % of the held-out rows,
-    held 99.6 % of its sum of squares (`unexplained`, t = 6558). A torque flipping *after* the
+    `none` (slip from two encoders, windows 67-97 ms) the torque led the logged slip by 4-40 ms
+    (median 33.5) at each of 11 crossings, and 67 held-out rows off by 20-1600 N*m held 99.6 %
+    of its held-out sum of squares (`unexplained`, t = 6558). A torque flipping *after* the
     slip is left to the diagnosis: a sensor lag and a transport delay do that, and the smear is
     their evidence. The campaign's lead (the median over crossings with a measured flip, from
     3 of them, when positive) widens the crossings where no flip is measured; a crossing's own
