@@ -118,7 +118,8 @@ def detect_lockup(t_s, slip_rad_s, smooth_s: float = 0.05, min_dwell_s: float = 
     sigma_cap = max_threshold_rad_s / k_exit
     # a slip logged in steps of q reads a locked clutch as mostly exact zeros: the MAD sees no
     # noise at all, and the thresholds would fall to the lock tolerance, below one step
-    floor = min(max(slip_quantum(w) / np.sqrt(12.0), 1e-12), sigma_cap)
+    # (slip_resolution: the quantum, or the typical change of a reading that mostly repeats)
+    floor = min(max(slip_resolution(w) / np.sqrt(12.0), 1e-12), sigma_cap)
     sigma = min(max(sigma, floor), sigma_cap)
     for _ in range(max_rounds):
         t_in = max(k_enter * sigma, lock_slip_rad_s)
@@ -162,6 +163,27 @@ def slip_quantum(w, on_grid_frac: float = 0.95) -> float:
     q = float(repeated[0])
     r = d / q
     return q if float(np.mean(np.abs(r - np.round(r)) < 0.05)) >= on_grid_frac else 0.0
+
+
+def slip_resolution(w, unchanged_frac: float = 0.5) -> float:
+    """The smallest change the slip reading resolves (rad/s): its quantum (``slip_quantum``)
+    when it is logged on one grid; else, for a reading that repeats its value on at least
+    ``unchanged_frac`` of its successive samples, the median of its changes; else 0 (a
+    continuous reading). The second is a count read out faster than it changes, or the
+    difference of two: slip from two wheel encoders, each counting its tone wheel's edges over a
+    window on its own grid (0.217 and 0.233 rad/s on an outside generator's campaign), changes
+    by either quantum, their difference or their sum, so no one grid holds 95 % of its changes.
+    There 74 % of the successive samples were unchanged, the first-difference MAD was 0, the
+    noise estimate fell to nothing, none of the 2-5 % locked time was found and the locked
+    dither made 150-180 zero crossings per bag."""
+    q = slip_quantum(w)
+    if q > 0.0:
+        return q
+    w = np.asarray(w, float)
+    d = np.abs(np.diff(w[np.isfinite(w)]))
+    if d.size < 10 or float(np.mean(d == 0.0)) < unchanged_frac:
+        return 0.0
+    return float(np.median(d[d > 0.0]))
 
 
 MAX_CROSSING_S = 0.25     # a crossing's window on each side at most (a slower one dwells: a lock)

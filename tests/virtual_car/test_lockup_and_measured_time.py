@@ -467,3 +467,36 @@ def test_the_plant_grid_is_dropped_where_the_force_moves_smoothly(tmp_path):
     camp = Campaign([replace(r, plant_grid=run_plant_grid(r)) for r in camp.runs])
     choice = choose_plant_grid(camp, model, noise_nm=4.0)
     assert not choice.used and choice.rows > 200 and choice.difference_rms_nm < 1.0, choice
+
+
+def test_lock_detection_on_a_slip_from_two_counting_encoders():
+    """Slip as the difference of two wheel encoders, each counting over a window and read out
+    faster than its count changes, each on its own grid (0.217 and 0.233 rad/s): most successive
+    samples repeat, the changes are either quantum, their difference or their sum (no one grid),
+    and the first-difference MAD is 0. The noise estimate keeps at least the reading's typical
+    change / sqrt 12; the lock phases are found and the locked dither makes no zero crossings."""
+    from clutch_model.diagnosis.lockup import slip_quantum, slip_resolution
+
+    rng = np.random.default_rng(11)
+    t = np.arange(0, 30, 0.006)                                   # slip messages at ~167 Hz
+    locked = ((t > 6) & (t < 9)) | ((t > 17) & (t < 21))
+    true_slip = np.where(locked, 0.0, 4 + 2 * np.sin(2 * np.pi * 0.2 * t))
+    base = 80 + 30 * np.sin(2 * np.pi * 0.03 * t)                 # the axle side
+    qa, qb = 0.233, 0.217
+
+    def encoder(speed, q, period_s):
+        ticks = np.arange(0, 30, period_s) + rng.uniform(0, period_s, 1)
+        read = q * np.floor(np.interp(ticks, t, speed) / q + rng.uniform(0, 1, ticks.size))
+        return read[np.clip(np.searchsorted(ticks, t, side="right") - 1, 0, None)]
+
+    w = encoder(base + true_slip, qa, 0.012) - encoder(base, qb, 0.013)
+    assert slip_quantum(w) == 0.0                                 # not on one grid
+    assert qb * 0.9 < slip_resolution(w) < qa * 1.1
+    assert slip_resolution(true_slip + rng.normal(0, 0.05, t.size)) == 0.0     # continuous
+    det = detect_lockup(t, w)
+    assert det.noise_sigma_rad_s > 0.05
+    found = det.at(t)
+    assert found[locked].mean() > 0.9
+    assert not found[~locked & (np.abs(t - 6) > 0.3) & (np.abs(t - 9) > 0.3)
+                     & (np.abs(t - 17) > 0.3) & (np.abs(t - 21) > 0.3)].any()
+    assert len(det.segments) == 2 and det.crossings == []
