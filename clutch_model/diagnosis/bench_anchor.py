@@ -269,6 +269,16 @@ def none_or_bench_anchored(data, sel, ctx, candidate_ids, alpha: float, min_gain
                f"held-out rows do not tell them apart (t = {check.found['runner_up']['held_out_t']:.1f})")
         left = {"held_out_rmse": float(vs_bench.rmse_alt), "bench_anchor": check.found}
         return (sel.overruled([cid, untold], left, why), check.found)
+    # a constant torque in the clutch torque's direction accounts for it as well: outside the catalog
+    signed = _signed_torque_as_well(check, cid, fitted, bench_base, ctx, train, say)
+    if signed is not None:
+        why = (f"{sel.reason}; but the calibration absorbed a discrepancy with the bench's friction "
+               f"({check.gap_text()}) that {cid} on the bench friction accounts for, and so does a constant torque "
+               f"in the clutch torque's direction ({signed['torque_nm']:+.3g} N*m: {signed['held_out_rmse']:.2f} N*m, "
+               f"{cid} better at t = {signed['mechanism_better_t']:.1f}): a drag of fixed size or a dead band on the "
+               f"torque reading, outside the catalog")
+        left = {"held_out_rmse": float(vs_bench.rmse_alt), "bench_anchor": check.found}
+        return (sel.overruled([cid], left, why), check.found)
     # a friction level off the bench's accounts for the gap as well: outside the catalog
     beats_level, level, vs_level = check.against_level(cid, fitted, bench_base, ctx, train, say)
     if not beats_level and _the_calibrations_level(check, level, say):
@@ -289,6 +299,26 @@ def none_or_bench_anchored(data, sel, ctx, candidate_ids, alpha: float, min_gain
     cause = Cause(cid, fitted, dict(fitted.parameters), ci, vs_bench)
     named = replace(sel, verdict="named", causes=[cause], final=fitted, reason=why, closest=[], closest_leaves={})
     return named, check.found
+
+
+def _signed_torque_as_well(check: _Check, cid: str, fitted, bench_base, ctx, train, say) -> dict | None:
+    """The mechanism ``cid`` that accounts for the gap (on the bench friction) against a constant
+    torque in the clutch torque's direction on the bench friction (signed_torque.py): its
+    figures (also in ``check.found["signed_constant_torque"]``) where the mechanism does not
+    predict the held-out rows better at the check's level, else None."""
+    from clutch_model.diagnosis.selection import residual
+    from clutch_model.diagnosis.signed_torque import fit_signed_torque
+
+    rival = fit_signed_torque(bench_base, ctx.campaign, train, noise_sigma_nm=ctx.sigma_nm)
+    head = check.compare(residual(check.data, rival), residual(check.data, fitted))
+    beats = check.significant(head)
+    found = {"torque_nm": float(rival.parameters["torque_nm"]), "held_out_rmse": float(head.rmse_null),
+             "mechanism_better_t": float(head.t_stat), "mechanism_better": bool(beats)}
+    check.found["signed_constant_torque"] = found
+    say(f"  a constant torque in the clutch torque's direction ({found['torque_nm']:+.3g} N*m) on the bench friction: "
+        f"held-out RMSE {head.rmse_null:.2f} N*m; {cid} better at t = {head.t_stat:.1f}"
+        + ("" if beats else ": not told apart, outside the catalog"))
+    return None if beats else found
 
 
 def _level_leaves(check: _Check, bench_base, ctx, train, say) -> tuple:

@@ -126,9 +126,9 @@ class ForcePathObjective(CampaignObjective):
     correction; the base model's force goes through the path (``path_force``) before the plant."""
 
     def __init__(self, base: ClutchModel, campaign, fit_mask, specs, noise_sigma_nm: float = 1.0,
-                 ridge_factor: float = 1.0):
-        super().__init__(base, campaign, fit_mask, None, specs, fit_friction=True, noise_sigma_nm=noise_sigma_nm,
-                         ridge_factor=ridge_factor)
+                 ridge_factor: float = 1.0, fit_friction: bool = True):
+        super().__init__(base, campaign, fit_mask, None, specs, fit_friction=fit_friction,
+                         noise_sigma_nm=noise_sigma_nm, ridge_factor=ridge_factor)
 
     def path_force(self, values) -> np.ndarray:
         """The force on the plant's rows through the path with parameter ``values`` (model units)."""
