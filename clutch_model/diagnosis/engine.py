@@ -62,6 +62,7 @@ from clutch_model.diagnosis.static_friction import fit_static_friction, lock_ent
 from clutch_model.diagnosis.slip_acceleration import named_or_slip_acceleration, none_or_slip_acceleration
 from clutch_model.diagnosis.torque_line import none_or_torque_line
 from clutch_model.diagnosis.torque_range import find_torque_rails, without_torque_at_rails
+from clutch_model.diagnosis.anti_alias import remainder_in_the_sensor
 from clutch_model.diagnosis.bench_anchor import (named_again_on_the_bench, named_and_bench_anchored,
                                                   none_or_bench_anchored)
 from clutch_model.diagnosis.fitting import (CANDIDATE_IDS, CandidateFit, fit_candidate, time_mechanism_ids,
@@ -69,8 +70,9 @@ from clutch_model.diagnosis.fitting import (CANDIDATE_IDS, CandidateFit, fit_can
 from clutch_model.diagnosis.friction_ridge import held_to_the_data
 from clutch_model.diagnosis.ridged_selection import selection_at_the_data_ridge
 from clutch_model.diagnosis.noise_model import DEFAULT_MAX_ORDER, fit_noise_model, white_floor
-from clutch_model.diagnosis.selection import (Selection, SelectionData, _compare, leaves_of, refit_chain, residual,
-                                               rival_of_extension, select_causes, timing_widened)
+from clutch_model.diagnosis.selection import (Selection, SelectionData, _compare, _remainder_test, leaves_of,
+                                               refit_chain, residual, rival_of_extension, select_causes,
+                                               timing_widened)
 from clutch_model.diagnosis.split import Split, choose_split
 from clutch_model.diagnosis import sample as S
 from clutch_model.diagnosis.sample import DEFAULT_BUDGET_S
@@ -1055,8 +1057,13 @@ def _diagnose_floored(campaign: Campaign, locked: np.ndarray, *, nominal, bench_
     cands = [MechanismCandidate(cid, ctx) for cid in ids]
     if fit_executor is not None:
         fit_executor.register(cands)
+    # structure left after a named lag or delay on the measurement: the sensor's own filter? (anti_alias.py)
+    in_the_sensor = remainder_in_the_sensor(
+        data, campaign, sigma_guess,
+        lambda resid, fitted: _remainder_test(data, resid, ALPHA, STRUCTURE_GAIN_FRAC, DEFAULT_MAX_ORDER, fitted), say)
     select = partial(select_causes, alpha=ALPHA, min_gain_frac=NAMED_GAIN_FRAC,
-                     structure_min_gain_frac=STRUCTURE_GAIN_FRAC, plain_gain=True, progress=say)
+                     structure_min_gain_frac=STRUCTURE_GAIN_FRAC, plain_gain=True, progress=say,
+                     remainder_in_the_sensor=in_the_sensor)
     sel = select(data, base, cands, after_first_step=first_step)
     # the selection again with every fit's correction at the data's ridge (ridged_selection.py)
     sel, base_r, cands_r, ctx_r, ridged = selection_at_the_data_ridge(

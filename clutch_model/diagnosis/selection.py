@@ -1306,13 +1306,17 @@ def select_causes(data: SelectionData, baseline, candidates: Sequence, alpha: fl
                   min_gain_frac: float = MIN_GAIN_FRAC, lookalike_alpha: float = LOOKALIKE_ALPHA,
                   max_causes: int = MAX_CAUSES, intervals: bool = True, max_order: int = DEFAULT_MAX_ORDER,
                   refine_top: int = 3, structure_min_gain_frac: float | None = None,
-                  plain_gain: bool = False, progress=None, after_first_step=None) -> Selection:
+                  plain_gain: bool = False, progress=None, after_first_step=None,
+                  remainder_in_the_sensor=None) -> Selection:
     """Forward selection of causes (see the module docstring). ``baseline`` is a fitted model
     (``predict(data)``) without any candidate. ``min_gain_frac``: materiality of a candidate
     (cut of the held-out innovation variance); ``structure_min_gain_frac``: of structure the
     flexible residual model finds (default: the same); ``plain_gain``: a cause must also lower
     the plain held-out RMSE. ``after_first_step``: called with the first SelectionStep (every
-    candidate scored against the baseline) before the selection goes on; it may raise to stop it."""
+    candidate scored against the baseline) before the selection goes on; it may raise to stop it.
+    ``remainder_in_the_sensor``: called as (the named model, their ids, the structure left)
+    where structure remains after named causes; a non-empty answer says why that structure is
+    the sensor's (anti_alias.remainder_in_the_sensor) and the causes are named."""
     if structure_min_gain_frac is None:
         structure_min_gain_frac = min_gain_frac
     say = progress or (lambda msg: None)
@@ -1442,6 +1446,11 @@ def select_causes(data: SelectionData, baseline, candidates: Sequence, alpha: fl
     if within_reading:
         structured_left = False
         dropped.append(within_reading)
+    if named and structured_left and remainder_in_the_sensor is not None:
+        in_the_sensor = remainder_in_the_sensor(current, [c.id for c in named], rem_struct)
+        if in_the_sensor:
+            structured_left = False
+            dropped.append(in_the_sensor)
     named_ids = {c.id for c in named}
     unresolved = sorted({lk for s in steps for lk in s.lookalikes if lk not in named_ids})
     if unidentified and not named:
