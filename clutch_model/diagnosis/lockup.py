@@ -165,25 +165,30 @@ def slip_quantum(w, on_grid_frac: float = 0.95) -> float:
     return q if float(np.mean(np.abs(r - np.round(r)) < 0.05)) >= on_grid_frac else 0.0
 
 
-def slip_resolution(w, unchanged_frac: float = 0.5) -> float:
+def slip_resolution(w, recurring_frac: float = 0.5, recurring_steps: int = 4) -> float:
     """The smallest change the slip reading resolves (rad/s): its quantum (``slip_quantum``)
-    when it is logged on one grid; else, for a reading that repeats its value on at least
-    ``unchanged_frac`` of its successive samples, the median of its changes; else 0 (a
-    continuous reading). The second is a count read out faster than it changes, or the
-    difference of two: slip from two wheel encoders, each counting its tone wheel's edges over a
-    window on its own grid (0.217 and 0.233 rad/s on an outside generator's campaign), changes
-    by either quantum, their difference or their sum, so no one grid holds 95 % of its changes.
-    There 74 % of the successive samples were unchanged, the first-difference MAD was 0, the
-    noise estimate fell to nothing, none of the 2-5 % locked time was found and the locked
+    when it is logged on one grid; else, for a reading whose changes are few recurring steps
+    (the ``recurring_steps`` commonest hold at least ``recurring_frac`` of them), the median of
+    its changes; else 0 (a continuous reading, whose changes do not recur, even when each value
+    is held over several samples). The second is the difference of two quantised readings:
+    slip from two wheel encoders, each counting its tone wheel's edges over a window on its own
+    grid (0.217 and 0.233 rad/s on an outside generator's campaign), changes by either quantum,
+    their difference or their sum, so no one grid holds 95 % of its changes (the two quanta
+    held 92 %). There the first-difference MAD was 0 (74 % of the successive samples unchanged),
+    the noise estimate fell to nothing, none of the 2-5 % locked time was found and the locked
     dither made 150-180 zero crossings per bag."""
     q = slip_quantum(w)
     if q > 0.0:
         return q
     w = np.asarray(w, float)
     d = np.abs(np.diff(w[np.isfinite(w)]))
-    if d.size < 10 or float(np.mean(d == 0.0)) < unchanged_frac:
+    d = d[d > 0.0]
+    if d.size < 10:
         return 0.0
-    return float(np.median(d[d > 0.0]))
+    _, counts = np.unique(np.round(d, 9), return_counts=True)
+    if np.sort(counts)[::-1][:recurring_steps].sum() < recurring_frac * d.size:
+        return 0.0
+    return float(np.median(d))
 
 
 MAX_CROSSING_S = 0.25     # a crossing's window on each side at most (a slower one dwells: a lock)

@@ -493,6 +493,8 @@ def test_lock_detection_on_a_slip_from_two_counting_encoders():
     assert slip_quantum(w) == 0.0                                 # not on one grid
     assert qb * 0.9 < slip_resolution(w) < qa * 1.1
     assert slip_resolution(true_slip + rng.normal(0, 0.05, t.size)) == 0.0     # continuous
+    held = np.repeat(true_slip[::10] + rng.normal(0, 0.05, t.size // 10), 10)    # ... held 10 samples
+    assert slip_resolution(held) == 0.0
     det = detect_lockup(t, w)
     assert det.noise_sigma_rad_s > 0.05
     found = det.at(t)
