@@ -607,6 +607,22 @@ def test_interval_that_does_not_pin_the_parameter_down():
     assert _unidentified({"ratio": [3.4e-10, 977.0]})
     assert _unidentified({"offset_nm": [0.0125, 8.22]})
     assert _unidentified({"coeff": [-0.5, 2.0]})
+
+
+def test_a_time_parameter_is_judged_at_the_interval_its_model_is_timed_to():
+    """Where the force is sampled more slowly than the rows, the model is timed to half the
+    force's sample interval, the report widens a lag's interval by that, and a lag whose
+    interval then holds 0 is not identified (a 4.8 ms lag [2.5, 7.0] with the force at 157 Hz)."""
+    from types import SimpleNamespace
+
+    from clutch_model.diagnosis.selection import _unidentified, timing_half_s
+
+    fitted = SimpleNamespace(context=SimpleNamespace(timing_interval_s=1 / 157.0))
+    half = timing_half_s(fitted, 0.5 / 525.0)
+    assert half == pytest.approx(0.5 / 157.0)
+    assert timing_half_s(SimpleNamespace(), 0.5 / 525.0) == 0.5 / 525.0          # no context: the rows'
+    assert _unidentified({"tau_s": [0.0025, 0.0070]}, ("tau_s",), half)
+    assert not _unidentified({"tau_s": [0.0025, 0.0070]}, ("tau_s",), 0.5 / 525.0)
     assert _unidentified({"tau_s": [0.01, float("inf")]})
     assert not _unidentified({"ratio": [0.1786, 0.2034]})
     assert not _unidentified({"offset_nm": [-36.0, -33.3]})
