@@ -181,16 +181,28 @@ class Player:
                             + ("; lock-step needs the node with use_sim_time:=true" if self.clock_mode else ""))
         self._spin_until(lambda: False, 0.3)  # let the other side match our endpoints too
 
-    def reset_node(self, timeout_s: float = 5.0) -> bool:
+    def reset_node(self, timeout_s: float = 30.0, attempt_s: float = 2.0) -> bool:
+        """Reset the node's plant (its ~/reset service) before a bag. A reset is idempotent, so
+        a request whose response has not come within ``attempt_s`` is sent again until
+        ``timeout_s``: ``wait_for_service`` matches the request's endpoints only, and a response
+        sent before the server has matched this client's response reader is lost (a lock-step
+        test on a loaded machine waited 5 s for one and failed)."""
         if not self._reset_client.wait_for_service(timeout_sec=min(timeout_s, 2.0)):
             if self.clock_mode:
                 raise PlayError(f"service {self.ns}/{NODE_NAME}/reset not available")
             self.node.get_logger().warning("no ~/reset service: the node is not reset before the bag")
             return False
-        future = self._reset_client.call_async(self._Trigger.Request())
-        if not self._spin_until(future.done, timeout_s) or not future.result().success:
-            raise PlayError(f"{self.ns}/{NODE_NAME}/reset did not succeed")
-        return True
+        deadline = time.monotonic() + timeout_s
+        while True:
+            future = self._reset_client.call_async(self._Trigger.Request())
+            left = deadline - time.monotonic()
+            if self._spin_until(future.done, max(min(attempt_s, left), 0.0)):
+                if not future.result().success:
+                    raise PlayError(f"{self.ns}/{NODE_NAME}/reset failed: {future.result().message}")
+                return True
+            self._reset_client.remove_pending_request(future)
+            if time.monotonic() >= deadline:
+                raise PlayError(f"{self.ns}/{NODE_NAME}/reset did not answer within {timeout_s:g} s")
 
     def _temperature(self, value: float, stamp_ns: int, frame_id: str = "", variance: float = 0.0):
         msg = self._Temperature()

@@ -210,3 +210,55 @@ def test_lockstep_recording_keeps_the_last_answer_per_sim_time():
     assert held.is_new("state", 30) and not held.is_new("state", 20)
     written.extend(held.drain())
     assert written == ["s10", "q10", "s20", "q20"] and held.drain() == []
+
+
+def test_a_reset_whose_response_is_lost_is_sent_again():
+    """``Player.reset_node``: a ~/reset response lost on the way (sent before the server matched
+    the client's response reader) is asked for again; one that never comes is a clear
+    PlayError after the deadline, and a refused reset says why."""
+    from clutch_sim_ros.play import Player, PlayError
+
+    class Future:
+        def __init__(self, answer):
+            self.answer = answer
+
+        def done(self):
+            return self.answer is not None
+
+        def result(self):
+            return self.answer
+
+    class Response:
+        def __init__(self, success, message=""):
+            self.success, self.message = success, message
+
+    class Client:
+        def __init__(self, answers):
+            self.answers, self.calls, self.removed = list(answers), 0, 0
+
+        def wait_for_service(self, timeout_sec):
+            return True
+
+        def call_async(self, request):
+            self.calls += 1
+            return Future(self.answers.pop(0) if self.answers else None)
+
+        def remove_pending_request(self, future):
+            self.removed += 1
+
+    class Trigger:
+        Request = object
+
+    def player(answers):
+        p = object.__new__(Player)
+        p._reset_client, p._Trigger, p.ns, p.clock_mode = Client(answers), Trigger, "/rig", True
+        p._spin_until = lambda done, timeout_s: done()
+        return p
+
+    p = player([None, None, Response(True)])                  # two responses lost, the third comes
+    assert p.reset_node(timeout_s=5.0, attempt_s=0.0) is True
+    assert p._reset_client.calls == 3 and p._reset_client.removed == 2
+    with pytest.raises(PlayError, match="did not answer within 0.01 s"):
+        player([]).reset_node(timeout_s=0.01, attempt_s=0.0)
+    with pytest.raises(PlayError, match="reset failed: busy"):
+        player([Response(False, "busy")]).reset_node()
