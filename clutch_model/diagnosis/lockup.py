@@ -118,7 +118,7 @@ def detect_lockup(t_s, slip_rad_s, smooth_s: float = 0.05, min_dwell_s: float = 
     sigma_cap = max_threshold_rad_s / k_exit
     # a slip logged in steps of q reads a locked clutch as mostly exact zeros: the MAD sees no
     # noise at all, and the thresholds would fall to the lock tolerance, below one step
-    # (slip_resolution: the quantum, or the typical change of a reading that mostly repeats)
+    # (slip_resolution: the quantum, or the median change of a reading whose changes recur)
     floor = min(max(slip_resolution(w) / np.sqrt(12.0), 1e-12), sigma_cap)
     sigma = min(max(sigma, floor), sigma_cap)
     for _ in range(max_rounds):
