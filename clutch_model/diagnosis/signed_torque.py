@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 
 from clutch_model.diagnosis.force_dynamics import ReadingObjective, _fit_from_best_start
-from clutch_model.plant.mechanisms.base import ParamSpec
+from clutch_model.plant.mechanisms import ParamSpec
 
 SIGNED_TORQUE_ID = "signed_constant_torque"
 SIGNED_TORQUE_BOUNDS_NM = (-200.0, 200.0)
