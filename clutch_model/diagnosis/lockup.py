@@ -228,16 +228,18 @@ def detect_lockup_run(run, **options) -> LockupResult:
     return detect_lockup(run.slip_raw_t, run.slip_raw_rad_s, **options)
 
 
+def slip_samples(run) -> tuple:
+    """(t, slip) the lock-up detection reads for a bag_reader.Run: its own slip samples as
+    logged when it has them, else its grid slip."""
+    if "slip_speed" in getattr(run, "samples", {}):
+        return run.slip_raw_t, run.slip_raw_rad_s
+    return run.t, run.slip_speed_rad_s
+
+
 def campaign_lockup(campaign, **options) -> list:
-    """``LockupResult`` per run of a bag_reader.Campaign (campaign order), from each run's own
-    slip samples when it has them, else from its grid slip."""
-    out = []
-    for run in campaign.runs:
-        if "slip_speed" in getattr(run, "samples", {}):
-            out.append(detect_lockup_run(run, **options))
-        else:
-            out.append(detect_lockup(run.t, run.slip_speed_rad_s, **options))
-    return out
+    """``LockupResult`` per run of a bag_reader.Campaign (campaign order), from each run's
+    ``slip_samples``."""
+    return [detect_lockup(*slip_samples(run), **options) for run in campaign.runs]
 
 
 FLIP_SEARCH_S = 0.3          # the measured torque's flip is looked for within this of a slip crossing
@@ -299,8 +301,7 @@ def with_torque_flips(results: list, campaign) -> float:
         if not res.crossings or tt is None or tt.size < 3:
             continue
         sigma_t = MAD_TO_SIGMA * float(np.median(np.abs(np.diff(yt)))) / np.sqrt(2.0)
-        ts = run.slip_raw_t if "slip_speed" in getattr(run, "samples", {}) else run.t
-        ws = run.slip_raw_rad_s if "slip_speed" in getattr(run, "samples", {}) else run.slip_speed_rad_s
+        ts, ws = slip_samples(run)
         seen = set()
         for cr in res.crossings:
             found = torque_flip_lead(cr, ts, ws, tt, yt, sigma_t)
