@@ -30,8 +30,9 @@ the band ends sharply a few omega_S above zero. The viscous slope k_V is left ou
 the slip noise into the torque at every slip, smoothly, and where that noise matters against
 a quiet torque sensor the slip is smoothed instead (input_hold). With it, a campaign whose
 torque sensor is quiet near Nyquist (0.12 N*m) and one of whose slip sensors is noisy
-(0.06 rad/s) lost 5 % of its rows, up to 6.5 rad/s of slip. The static friction fit (static_friction.py) still reads these
-rows: it is fitted on the torque before any row is left out.
+(0.06 rad/s) lost 5 % of its rows, up to 6.5 rad/s of slip. The static friction fit
+(static_friction.py) still reads these rows: it is fitted on the torque before any row is left
+out.
 """
 from __future__ import annotations
 
